@@ -1,0 +1,498 @@
+"""The real NYC map: OSM street network clipped to TLC taxi zones, and the shared file readers.
+
+The street network is read from the node/edge CSV pair OSMnx users export
+(``osmid,x,y`` and ``u,v,length``) or from an OSMnx GraphML file; the taxi
+zones from the WGS84 GeoJSON or the official shapefile (EPSG:2263, inverted
+here with the Lambert conformal conic formulas of Snyder, *Map Projections —
+A Working Manual*, 1987, so no PROJ install is needed).
+
+The CSV helpers at the bottom are shared by every real-format reader in
+:mod:`city`: they keep the 1-based line number of each record, so an error
+names the line a user sees in an editor even when quoted fields span lines.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import re
+import warnings
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import shapely
+from shapely.geometry import shape
+
+from city.errors import ConfigError, DataError
+from city.graph import City, largest_scc
+
+#: Two zone polygons closer than this (degrees, about 5 m) count as sharing a border.
+BORDER_TOLERANCE_DEG = 5e-5
+#: Mean Earth radius used for local distance conversions (metres).
+EARTH_RADIUS_M = 6_371_008.8
+
+
+def load_nyc_city(data_dir: Path, zone_group: str = "manhattan_below_60", zones: list[int] | None = None) -> City:
+    """Load the NYC street graph clipped to a group of TLC taxi zones.
+
+    Parameters
+    ----------
+    data_dir : Path
+        A folder laid out like ``shared/data`` (holding ``nyc/``) or that ``nyc/`` folder itself.
+    zone_group : str
+        A group of ``taxi_zones/taxi_zone_groups.csv``; ignored when ``zones`` is given.
+    zones : list of int, optional
+        Explicit TLC LocationIDs to keep.
+
+    Returns
+    -------
+    City
+        Sectors are the chosen zones in LocationID order; ``xy`` is lon/lat
+        (``crs="lonlat"``). ``info["dropped"]`` counts the nodes outside the
+        zones, the edges losing an end, and the nodes and edges outside the
+        largest strongly connected component; ``info["warnings"]`` holds the
+        file problems that were skipped.
+
+    Raises
+    ------
+    ConfigError
+        Missing data directory, unknown zone group or zone id.
+    DataError
+        Missing or malformed files (the message names file and line).
+    """
+    root = Path(data_dir)
+    if not root.is_dir():
+        raise ConfigError(f"NYC data directory not found: {root}")
+    if (root / "nyc").is_dir():
+        root = root / "nyc"
+    street_dir, zone_dir = root / "street_network", root / "taxi_zones"
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        osmid, xy, u, v, length, street_src = _read_streets(street_dir)
+    notes = [str(w.message) for w in caught]
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
+
+    polygons, zone_names, zone_src = read_taxi_zones(zone_dir)
+    ids = _choose_zones(zone_dir, zone_group, zones, polygons)
+    names = [zone_names[i] for i in ids]
+    polys = [polygons[i] for i in ids]
+
+    node_zone = np.full(len(xy), -1, dtype=np.int64)
+    for k, poly in enumerate(polys):
+        hit = (node_zone < 0) & shapely.intersects_xy(poly, xy[:, 0], xy[:, 1])
+        node_zone[hit] = k
+    inside = node_zone >= 0
+    keep_edge = inside[u] & inside[v]
+    new_index = np.cumsum(inside) - 1
+    n_in = int(inside.sum())
+    u1, v1, len1 = new_index[u[keep_edge]], new_index[v[keep_edge]], length[keep_edge]
+    scc = largest_scc(n_in, u1, v1)
+    keep_scc = scc[u1] & scc[v1]
+    final_index = np.cumsum(scc) - 1
+
+    border = np.zeros((len(ids), len(ids)), dtype=bool)
+    for k, poly in enumerate(polys):
+        border[k] = shapely.dwithin(poly, np.asarray(polys, dtype=object), BORDER_TOLERANCE_DEG)
+
+    nodes_kept = np.flatnonzero(inside)[scc]
+    dropped = {
+        "nodes_outside_zones": int(len(xy) - n_in),
+        "edges_outside_zones": int(len(u) - keep_edge.sum()),
+        "nodes_outside_scc": int(n_in - scc.sum()),
+        "edges_outside_scc": int(len(u1) - keep_scc.sum()),
+    }
+    info = {
+        "source": {"streets": street_src, "zones": zone_src},
+        "zone_group": None if zones is not None else zone_group,
+        "nodes_read": int(len(xy)),
+        "edges_read": int(len(u)),
+        "dropped": dropped,
+        "warnings": notes,
+    }
+    return City.build(
+        "nyc",
+        xy[nodes_kept],
+        final_index[u1[keep_scc]],
+        final_index[v1[keep_scc]],
+        len1[keep_scc],
+        node_zone[nodes_kept],
+        names,
+        crs="lonlat",
+        sector_ids=np.asarray(ids, dtype=np.int64),
+        osmid=osmid[nodes_kept],
+        border_adj=border,
+        info=info,
+    )
+
+
+# ------------------------------------------------------------------ streets
+def _read_streets(street_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
+    """Node/edge CSVs if present, else the single GraphML file of the folder."""
+    if not street_dir.is_dir():
+        raise DataError("street network folder not found", path=street_dir)
+    nodes = sorted(street_dir.glob("*_nodes.csv"))
+    edges = sorted(street_dir.glob("*_edges.csv"))
+    if nodes and edges:
+        return (*read_street_csv(nodes[0], edges[0]), str(nodes[0].name))
+    graphml = sorted(street_dir.glob("*.graphml"))
+    if graphml:
+        return (*read_graphml(graphml[0]), str(graphml[0].name))
+    raise DataError("no *_nodes.csv/*_edges.csv pair or *.graphml street network", path=street_dir)
+
+
+def read_street_csv(nodes_path: Path, edges_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Read an OSMnx-style node CSV (``osmid,x,y``) and edge CSV (``u,v,length``).
+
+    A row holding only its first field (the stray ``9706`` line of the
+    published Manhattan file) is skipped with a warning; any other bad row
+    raises.
+
+    Returns
+    -------
+    osmid, xy, u, v, length
+        ``u`` and ``v`` are indices into ``osmid``/``xy``; ``length`` in metres.
+    """
+    nodes = read_csv(nodes_path, ["osmid", "x", "y"])
+    osmid = nodes.ints("osmid")
+    xy = np.column_stack([nodes.floats("x"), nodes.floats("y")])
+    order = np.argsort(osmid, kind="stable")
+    dup = np.flatnonzero(osmid[order][1:] == osmid[order][:-1])
+    if len(dup):
+        raise DataError(f"duplicate osmid {osmid[order][dup[0]]}", path=nodes_path, row=int(nodes.lines[order][dup[0] + 1]))
+
+    edges = read_csv(edges_path, ["u", "v", "length"])
+    stray = np.array([v == "" and w == "" for v, w in zip(edges.col("v"), edges.col("length"))], dtype=bool)
+    for line in edges.lines[stray]:
+        warnings.warn(f"{edges_path}, row {line}: skipping stray row with no 'v' and 'length'", stacklevel=2)
+    edges = edges.subset(~stray)
+    u_id, v_id, length = edges.ints("u"), edges.ints("v"), edges.floats("length")
+    if len(length) and (np.isnan(length).any() or (length < 0).any()):
+        bad = int(np.flatnonzero(np.isnan(length) | (length < 0))[0])
+        raise DataError(f"column 'length': {edges.col('length')[bad]!r} is not a non-negative length", path=edges_path, row=int(edges.lines[bad]))
+    sorted_ids = osmid[order]
+    idx = []
+    for name, ids in (("u", u_id), ("v", v_id)):
+        pos = np.clip(np.searchsorted(sorted_ids, ids), 0, max(len(sorted_ids) - 1, 0))
+        missing = np.flatnonzero(sorted_ids[pos] != ids) if len(sorted_ids) else np.arange(len(ids))
+        if len(missing):
+            raise DataError(f"column '{name}': node {ids[missing[0]]} is not in {nodes_path.name}", path=edges_path, row=int(edges.lines[missing[0]]))
+        idx.append(order[pos])
+    return osmid, xy, idx[0], idx[1], length
+
+
+def read_graphml(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Read an OSMnx GraphML file (node attributes ``x``, ``y``; edge attribute ``length``).
+
+    Returns the same arrays as :func:`read_street_csv`; node ids that are not
+    integers are numbered in file order.
+    """
+    import networkx as nx
+
+    try:
+        graph = nx.read_graphml(path, force_multigraph=True)
+    except (OSError, SyntaxError, nx.NetworkXError, ValueError) as exc:
+        raise DataError(f"not a readable GraphML file ({exc})", path=path) from exc
+    names = list(graph.nodes)
+    index = {name: i for i, name in enumerate(names)}
+    xy = np.empty((len(names), 2))
+    for i, (name, attrs) in enumerate(graph.nodes(data=True)):
+        try:
+            xy[i] = float(attrs["x"]), float(attrs["y"])
+        except (KeyError, TypeError, ValueError):
+            raise DataError(f"node {name!r} lacks numeric 'x' and 'y' attributes", path=path) from None
+    try:
+        osmid = np.array([int(n) for n in names], dtype=np.int64)
+    except ValueError:
+        osmid = np.arange(len(names), dtype=np.int64)
+    rows = []
+    for a, b, attrs in graph.edges(data=True):
+        try:
+            rows.append((index[a], index[b], float(attrs["length"])))
+        except (KeyError, TypeError, ValueError):
+            raise DataError(f"edge {a!r} -> {b!r} lacks a numeric 'length' attribute", path=path) from None
+    arr = np.array(rows, dtype=np.float64).reshape(-1, 3)
+    return osmid, xy, arr[:, 0].astype(np.int64), arr[:, 1].astype(np.int64), arr[:, 2]
+
+
+# -------------------------------------------------------------------- zones
+def read_taxi_zones(zone_dir: Path) -> tuple[dict[int, shapely.Geometry], dict[int, str], str]:
+    """TLC taxi-zone polygons in lon/lat, by LocationID, and their names.
+
+    Prefers ``*.geojson``; otherwise reads ``*.shp`` with its ``.prj``.
+    Features sharing a LocationID (zones split in several polygons) are merged.
+    """
+    if not zone_dir.is_dir():
+        raise DataError("taxi zone folder not found", path=zone_dir)
+    geojson = sorted(zone_dir.glob("*.geojson"))
+    shp = sorted(zone_dir.glob("*.shp"))
+    if geojson:
+        path = geojson[0]
+        try:
+            doc = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise DataError(f"not a readable GeoJSON file ({exc})", path=path) from exc
+        features = [(f.get("properties") or {}, f.get("geometry")) for f in doc.get("features", [])]
+        transform = None
+    elif shp:
+        path = shp[0]
+        features, transform = _read_shapefile(path)
+    else:
+        raise DataError("no taxi_zones *.geojson or *.shp file", path=zone_dir)
+
+    parts: dict[int, list[shapely.Geometry]] = {}
+    names: dict[int, str] = {}
+    for k, (props, geom) in enumerate(features, start=1):
+        props = {key.lower(): val for key, val in props.items()}
+        try:
+            zone_id = int(props["locationid"])
+            poly = shape(geom)
+        except (KeyError, TypeError, ValueError, AttributeError, shapely.errors.GEOSException) as exc:
+            raise DataError(f"feature {k}: needs a LocationID and a polygon ({exc})", path=path) from None
+        if transform is not None:
+            poly = shapely.transform(poly, transform)
+        parts.setdefault(zone_id, []).append(shapely.make_valid(poly))
+        names.setdefault(zone_id, str(props.get("zone", zone_id)))
+    polygons = {zid: shapely.union_all(p) if len(p) > 1 else p[0] for zid, p in parts.items()}
+    for poly in polygons.values():
+        shapely.prepare(poly)
+    return polygons, names, path.name
+
+
+def _read_shapefile(path: Path) -> tuple[list[tuple[dict, dict]], object]:
+    """Records and geometries of a shapefile, and the transform to lon/lat its ``.prj`` implies."""
+    import shapefile
+
+    prj = path.with_suffix(".prj")
+    if not prj.is_file():
+        raise DataError("shapefile has no .prj file; cannot tell its coordinate system", path=path)
+    transform = lcc_inverse_from_prj(prj.read_text(encoding="utf-8", errors="replace"), prj)
+    try:
+        with shapefile.Reader(str(path)) as reader:
+            fields = [f[0] for f in reader.fields[1:]]
+            features = [(dict(zip(fields, sr.record)), sr.shape.__geo_interface__) for sr in reader.iterShapeRecords()]
+    except (OSError, shapefile.ShapefileException) as exc:
+        raise DataError(f"not a readable shapefile ({exc})", path=path) from exc
+    return features, transform
+
+
+def lcc_inverse_from_prj(wkt: str, path: Path | None = None):
+    """A function mapping projected ``(n, 2)`` coordinates to lon/lat, from ESRI ``.prj`` WKT.
+
+    Geographic WKT (``GEOGCS`` only) gives ``None`` (no transform); ``PROJCS``
+    must be a two-standard-parallel Lambert conformal conic, as the TLC file
+    (NAD83 / New York Long Island, US feet). NAD83 is taken as WGS84 (they
+    differ by about a metre).
+    """
+    if not wkt.lstrip().upper().startswith("PROJCS"):
+        return None
+    if "lambert_conformal_conic" not in wkt.lower():
+        raise DataError("unsupported projection (only geographic or Lambert conformal conic)", path=path)
+
+    def param(name: str) -> float:
+        m = re.search(rf'PARAMETER\["{name}",\s*([-+0-9.eE]+)\]', wkt, flags=re.IGNORECASE)
+        if not m:
+            raise DataError(f"projection lacks parameter {name}", path=path)
+        return float(m.group(1))
+
+    sph = re.search(r'SPHEROID\["[^"]*",\s*([0-9.]+),\s*([0-9.]+)\]', wkt)
+    units = re.findall(r'UNIT\["[^"]*",\s*([0-9.eE]+)\]', wkt)
+    if not sph or not units:
+        raise DataError("projection lacks SPHEROID or UNIT", path=path)
+    a, inv_f = float(sph.group(1)), float(sph.group(2))
+    unit = float(units[-1])
+    e = math.sqrt(2 / inv_f - 1 / inv_f**2)
+    lat1, lat2 = math.radians(param("Standard_Parallel_1")), math.radians(param("Standard_Parallel_2"))
+    lat0, lon0 = math.radians(param("Latitude_Of_Origin")), math.radians(param("Central_Meridian"))
+    fe, fn = param("False_Easting") * unit, param("False_Northing") * unit
+
+    def m_(phi: float) -> float:
+        return math.cos(phi) / math.sqrt(1 - (e * math.sin(phi)) ** 2)
+
+    def t_(phi: float) -> float:
+        s = e * math.sin(phi)
+        return math.tan(math.pi / 4 - phi / 2) / ((1 - s) / (1 + s)) ** (e / 2)
+
+    n = (math.log(m_(lat1)) - math.log(m_(lat2))) / (math.log(t_(lat1)) - math.log(t_(lat2)))
+    big_f = m_(lat1) / (n * t_(lat1) ** n)
+    rho0 = a * big_f * t_(lat0) ** n
+
+    def inverse(coords: np.ndarray) -> np.ndarray:
+        x = coords[:, 0] * unit - fe
+        y = rho0 - (coords[:, 1] * unit - fn)
+        rho = np.sign(n) * np.hypot(x, y)
+        t = (rho / (a * big_f)) ** (1 / n)
+        theta = np.arctan2(np.sign(n) * x, np.sign(n) * y)
+        phi = np.pi / 2 - 2 * np.arctan(t)
+        for _ in range(8):  # Snyder eq. 7-9, converges to < 1e-12 rad in a few steps
+            s = e * np.sin(phi)
+            phi = np.pi / 2 - 2 * np.arctan(t * ((1 - s) / (1 + s)) ** (e / 2))
+        return np.column_stack([np.degrees(theta / n + lon0), np.degrees(phi)])
+
+    return inverse
+
+
+def _choose_zones(zone_dir: Path, zone_group: str, zones: list[int] | None, polygons: dict) -> list[int]:
+    """The LocationIDs to keep, sorted: the explicit list or the named group."""
+    if zones is not None:
+        chosen = sorted({int(z) for z in zones})
+    else:
+        path = zone_dir / "taxi_zone_groups.csv"
+        table = read_csv(path, ["LocationID", "Zone", "Borough", "group"], header=False)
+        groups = np.array(table.col("group"))
+        chosen = sorted(set(table.ints("LocationID")[groups == zone_group].tolist()))
+        if not chosen:
+            raise ConfigError(f"unknown zone group {zone_group!r} in {path} (groups: {', '.join(sorted(set(groups)))})")
+    unknown = [z for z in chosen if z not in polygons]
+    if unknown:
+        raise ConfigError(f"taxi zone(s) {unknown} not found in {zone_dir}")
+    if not chosen:
+        raise ConfigError("no taxi zones chosen")
+    return chosen
+
+
+# ------------------------------------------------------------ geo helpers
+def nearest_nodes(city: City, lon: np.ndarray, lat: np.ndarray, max_dist_m: float = 300.0) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest city node to each lon/lat point, and whether it lies within ``max_dist_m``.
+
+    Distances use a local equirectangular projection around the city (exact to
+    well under 1 % across a city).
+    """
+    from scipy.spatial import cKDTree
+
+    if city.crs != "lonlat":
+        raise ConfigError(f"city {city.name!r} has {city.crs!r} coordinates; lon/lat points need a lon/lat map")
+    scale = np.array([math.cos(math.radians(float(np.mean(city.xy[:, 1])))), 1.0]) * math.radians(1) * EARTH_RADIUS_M
+    tree = cKDTree(city.xy * scale)
+    pts = np.column_stack([np.asarray(lon, dtype=np.float64), np.asarray(lat, dtype=np.float64)])
+    finite = np.isfinite(pts).all(axis=1)
+    dist = np.full(len(pts), np.inf)
+    node = np.zeros(len(pts), dtype=np.int64)
+    if finite.any():
+        dist[finite], node[finite] = tree.query(pts[finite] * scale)
+    return node, dist <= max_dist_m
+
+
+# -------------------------------------------------------------- CSV helpers
+@dataclass(frozen=True)
+class CsvTable:
+    """Text columns of a CSV file with the 1-based line on which each record starts."""
+
+    path: Path
+    columns: dict[str, list[str]]
+    lines: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.lines)
+
+    def has(self, name: str) -> bool:
+        return name in self.columns
+
+    def require(self, names: Iterable[str]) -> None:
+        """Raise a :class:`DataError` on line 1 unless every column in ``names`` exists."""
+        missing = [c for c in names if c not in self.columns]
+        if missing:
+            found = ", ".join(self.columns) or "nothing"
+            raise DataError(f"missing column(s) {', '.join(map(repr, missing))} (found: {found})", path=self.path, row=1)
+
+    def col(self, name: str) -> list[str]:
+        return self.columns[name]
+
+    def subset(self, mask: np.ndarray) -> "CsvTable":
+        idx = np.flatnonzero(mask)
+        return CsvTable(self.path, {k: [v[i] for i in idx] for k, v in self.columns.items()}, self.lines[idx])
+
+    def error(self, i: int, message: str) -> DataError:
+        """A :class:`DataError` for record ``i`` (0-based) of this table."""
+        return DataError(message, path=self.path, row=int(self.lines[i]))
+
+    def floats(self, name: str, allow_empty: bool = False) -> np.ndarray:
+        """Column ``name`` as float64; empty cells become NaN when ``allow_empty``."""
+        values = [v if v or not allow_empty else "nan" for v in self.columns[name]]
+        try:
+            return np.array(values, dtype=np.float64)
+        except ValueError:
+            for i, v in enumerate(values):
+                try:
+                    float(v)
+                except ValueError:
+                    raise self.error(i, f"column '{name}': {v!r} is not a number") from None
+            raise
+
+    def ints(self, name: str) -> np.ndarray:
+        """Column ``name`` as int64 (``12.0`` is accepted, ``12.5`` is not)."""
+        out = np.empty(len(self), dtype=np.int64)
+        for i, v in enumerate(self.columns[name]):
+            try:
+                out[i] = int(v)
+            except ValueError:
+                try:
+                    f = float(v)
+                    if not f.is_integer():
+                        raise ValueError
+                    out[i] = int(f)
+                except (ValueError, OverflowError):
+                    raise self.error(i, f"column '{name}': {v!r} is not an integer") from None
+        return out
+
+
+def read_csv(path: Path, required: list[str], *, header: bool = True) -> CsvTable:
+    """Read a CSV file as text columns, checking that ``required`` columns exist.
+
+    With ``header=False`` the file has no header line and ``required`` names its
+    columns in order. Short records are padded with empty cells; a record with
+    more cells than the header raises.
+    """
+    path = Path(path)
+    try:
+        fh = open(path, newline="", encoding="utf-8-sig")
+    except OSError as exc:
+        raise DataError(f"cannot open file ({exc.strerror or exc})", path=path) from None
+    with fh:
+        reader = csv.reader(fh)
+        try:
+            if header:
+                names = [c.strip() for c in next(reader, [])]
+            else:
+                names = list(required)
+            CsvTable(path, dict.fromkeys(names), np.zeros(0)).require(required)
+            rows: list[list[str]] = []
+            lines: list[int] = []
+            start = reader.line_num + 1
+            for rec in reader:
+                if rec and any(cell.strip() for cell in rec):
+                    if len(rec) > len(names):
+                        raise DataError(f"{len(rec)} fields, but the header has {len(names)}", path=path, row=start)
+                    rows.append(rec + [""] * (len(names) - len(rec)))
+                    lines.append(start)
+                start = reader.line_num + 1
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise DataError(f"not a readable CSV file ({exc})", path=path, row=reader.line_num or None) from None
+    columns = {name: [r[k].strip() for r in rows] for k, name in enumerate(names)}
+    return CsvTable(path, columns, np.array(lines, dtype=np.int64))
+
+
+_OFFSET = re.compile(r"(Z|[+-]\d\d:?\d\d)$")
+
+
+def parse_times(table: CsvTable, name: str, fmt: str | None = None, *, strip_offset: bool = True) -> np.ndarray:
+    """Column ``name`` as naive ``datetime64[s]`` wall-clock times.
+
+    A trailing UTC offset (``-05:00``, ``Z``) is dropped when ``strip_offset``,
+    so ``2021-12-31 19:00:00-05:00`` reads as 19:00 local time. ``fmt`` is a
+    ``strptime`` format; without it ISO 8601 is expected.
+    """
+    import pandas as pd
+
+    values = [(_OFFSET.sub("", v) if strip_offset else v) for v in table.col(name)]
+    parsed = pd.to_datetime(pd.Series(values, dtype=object), format=fmt or "ISO8601", errors="coerce")
+    bad = np.flatnonzero(parsed.isna().to_numpy())
+    if len(bad):
+        i = int(bad[0])
+        expected = fmt or "ISO 8601, e.g. 2022-03-01 19:30"
+        raise table.error(i, f"column '{name}': {table.col(name)[i]!r} is not a date/time ({expected})")
+    return parsed.to_numpy().astype("datetime64[s]")

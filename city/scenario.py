@@ -1,0 +1,95 @@
+"""Scenarios by name: the city plus its demand world, built once and cached on disk."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from city.errors import ConfigError
+from city.graph import City
+
+SCENARIOS = ("synthetic", "nyc")
+#: Bump when a change to a city builder changes its output, so caches rebuild.
+CITY_VERSION = "1"
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    city: City
+    world: object
+    data_dir: Path | None
+
+
+def cache_dir() -> Path:
+    """Where built artefacts live: ``$SURGE_CACHE`` or ``~/.cache/surge``."""
+    path = Path(os.environ.get("SURGE_CACHE", Path.home() / ".cache" / "surge"))
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def check_scenario(name: str, data_dir: Path | str | None) -> Path | None:
+    """Validate a scenario name and its data directory; raise :class:`ConfigError` with one line."""
+    if name not in SCENARIOS:
+        raise ConfigError(f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)}")
+    if name == "nyc":
+        if data_dir is None:
+            raise ConfigError("scenario 'nyc' needs --data DIR (a directory laid out like shared/data)")
+        data_dir = Path(data_dir)
+        if not data_dir.is_dir():
+            raise ConfigError(f"data directory {data_dir} does not exist")
+        return data_dir
+    return Path(data_dir) if data_dir is not None else None
+
+
+def _nyc_inputs(data_dir: Path) -> list[Path]:
+    return sorted(p for p in (data_dir / "nyc").rglob("*") if p.is_file() and p.suffix in {".csv", ".geojson", ".shp", ".graphml"})
+
+
+def load_city(name: str, data_dir: Path | str | None = None, *, use_cache: bool = True) -> City:
+    """Build (or load from cache) the street graph of a scenario."""
+    data_dir = check_scenario(name, data_dir)
+    key = hashlib.sha256(f"{name}|{CITY_VERSION}".encode())
+    if name == "nyc":
+        assert data_dir is not None
+        for p in _nyc_inputs(data_dir):
+            st = p.stat()
+            key.update(f"{p.resolve()}|{st.st_size}|{st.st_mtime_ns}".encode())
+    path = cache_dir() / f"city-{name}-{key.hexdigest()[:16]}.npz"
+    if use_cache and path.exists():
+        return City.load(path)
+    if name == "synthetic":
+        from city.synthetic import synthetic_city
+
+        city = synthetic_city()
+    else:
+        from city.nyc import load_nyc_city
+
+        assert data_dir is not None
+        city = load_nyc_city(data_dir)
+    if use_cache:
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        city.save(tmp)
+        os.replace(tmp, path)
+    return city
+
+
+def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 2022, seed: int = 0) -> Scenario:
+    """The city and its demand world: synthetic demand on either map, real weather and POIs when given."""
+    data_dir = check_scenario(name, data_dir)
+    city = load_city(name, data_dir)
+    from city.demand import synthetic_world
+
+    if name == "synthetic":
+        world = synthetic_world(city, year=year, seed=seed)
+    else:
+        from city.poi import read_poi_csv
+        from city.weather import read_weather_csv
+
+        assert data_dir is not None
+        weather = read_weather_csv(data_dir / "nyc" / "weather" / "airports_hourly_2022.csv", station="LGA", year=year)
+        pois = read_poi_csv(data_dir / "nyc" / "poi" / "nyc_points_of_interest.csv")
+        world = synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois)
+    return Scenario(name=name, city=city, world=world, data_dir=data_dir)

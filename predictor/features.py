@@ -1,0 +1,209 @@
+"""Input features of the two demand networks.
+
+Base features f (both networks; paper §4.2.1 "temporal and spatial data"):
+
+* hour of day, one-hot (24)
+* day of week, one-hot (7)
+* month as a point on the unit circle, ``sin/cos(2π (month-1)/12)`` (2).  A
+  one-hot month would leave the test months (Sep–Dec) with untrained weights,
+  because the networks train on Jan–Aug only; the cyclic code at least lets
+  them interpolate the seasonal trend.
+* US federal holiday flag (1), computed by :mod:`predictor.holidays`
+* weather: temperature (°F), precipitation (in), wind (mph), z-scored with the
+  training months' mean and standard deviation (3)
+* the sector's identity, one-hot (S).  The paper calls weather "spatial"; surge
+  adds the sector itself so that one network serves all sectors with their own
+  base levels.
+
+Event feature F_s (event network only): ``[ẑ_s, R̂_s]`` of size ``(b+1)·d``,
+the mean title+description embedding of the sector's events active in the hour,
+then the mean of their stacked review-cluster means R_w (events without reviews
+are left out of the R average; if none has reviews R̂_s is zero).  An event is
+active in the hour beginning at ``h`` when it overlaps ``[h, h+1h)``.  Each of
+the (b+1)·d columns is z-scored with the training event samples' statistics.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from predictor.cluster import GAMMA, N_CLUSTERS, Q_MAX, review_representation
+from predictor.holidays import us_federal_holidays
+
+N_TEMPORAL = 24 + 7 + 2 + 1
+WEATHER_NAMES = ("temp_f", "precip_in", "wind_mph")
+
+
+def temporal_names() -> list[str]:
+    return [f"hour_{h}" for h in range(24)] + [f"weekday_{d}" for d in range(7)] + ["month_sin", "month_cos", "holiday"]
+
+
+def temporal_features(when: dt.datetime) -> np.ndarray:
+    f = np.zeros(N_TEMPORAL, dtype=np.float32)
+    f[when.hour] = 1.0
+    f[24 + when.weekday()] = 1.0
+    ang = 2 * np.pi * (when.month - 1) / 12.0
+    f[31] = np.sin(ang)
+    f[32] = np.cos(ang)
+    f[33] = 1.0 if when.date() in us_federal_holidays(when.year) else 0.0
+    return f
+
+
+def year_hours(year: int) -> list[dt.datetime]:
+    start = dt.datetime(year, 1, 1)
+    n = (dt.date(year + 1, 1, 1) - dt.date(year, 1, 1)).days * 24
+    return [start + dt.timedelta(hours=i) for i in range(n)]
+
+
+def hour_index(when: dt.datetime, year: int) -> int:
+    return (when.date() - dt.date(year, 1, 1)).days * 24 + when.hour
+
+
+def temporal_matrix(year: int) -> np.ndarray:
+    return np.stack([temporal_features(h) for h in year_hours(year)])
+
+
+def weather_matrix(weather, n_hours: int) -> np.ndarray:
+    """Raw ``(H, 3)`` weather: temperature, precipitation, wind (NaN → column median)."""
+    w = np.column_stack(
+        [np.asarray(weather.temp_f, np.float64)[:n_hours], np.asarray(weather.precip_in, np.float64)[:n_hours], np.asarray(weather.wind_mph, np.float64)[:n_hours]]
+    )
+    if w.shape[0] < n_hours:  # short weather table: repeat the last row
+        w = np.vstack([w, np.repeat(w[-1:], n_hours - w.shape[0], axis=0)])
+    for k in range(3):
+        bad = ~np.isfinite(w[:, k])
+        if bad.any():
+            w[bad, k] = np.nanmedian(w[:, k]) if (~bad).any() else 0.0
+    return w.astype(np.float32)
+
+
+def weather_at(weather, when: dt.datetime) -> np.ndarray:
+    i = (when.timetuple().tm_yday - 1) * 24 + when.hour
+    i = min(i, len(weather.temp_f) - 1)
+    row = np.array([weather.temp_f[i], weather.precip_in[i], weather.wind_mph[i]], dtype=np.float64)
+    return np.where(np.isfinite(row), row, 0.0).astype(np.float32)
+
+
+def event_text(ev) -> str:
+    """The text whose embedding is z_w: title and description."""
+    title = (ev.title or "").strip()
+    desc = (ev.description or "").strip()
+    return f"{title}. {desc}" if desc else title
+
+
+@dataclass
+class EventVectors:
+    z: np.ndarray  # (d,)
+    R: np.ndarray  # (b, d)
+    has_reviews: bool
+
+
+class EventFeaturizer:
+    """Turns events into z_w and R_w, and sets of active events into F_s."""
+
+    def __init__(self, embedder, n_clusters: int = N_CLUSTERS, gamma: float = GAMMA, q_max: int = Q_MAX, seed: int = 0, verbose: bool = False) -> None:
+        self.embedder = embedder
+        self.b = int(n_clusters)
+        self.gamma = float(gamma)
+        self.q_max = int(q_max)
+        self.seed = int(seed)
+        self.verbose = verbose
+        self._vectors: dict[str, EventVectors] = {}
+        self._cluster_memo: dict[bytes, tuple[np.ndarray, bool]] = {}
+        self.timings: dict[str, float] = {"embed_s": 0.0, "cluster_s": 0.0}
+
+    @property
+    def d(self) -> int:
+        return self.embedder.dim
+
+    @property
+    def size(self) -> int:
+        return (self.b + 1) * self.d
+
+    def prepare(self, events: Sequence) -> None:
+        """Embed (batched, de-duplicated, cached) and cluster every event not yet seen."""
+        todo = [ev for ev in events if ev.event_id not in self._vectors]
+        if not todo:
+            return
+        texts: list[str] = []
+        for ev in todo:
+            texts.append(event_text(ev))
+            texts.extend(str(r) for r in tuple(ev.reviews)[: self.q_max])
+        t0 = time.perf_counter()
+        emb = self.embedder.embed(texts)
+        self.timings["embed_s"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        pos = 0
+        for ev in todo:
+            z = emb[pos]
+            pos += 1
+            reviews = tuple(ev.reviews)[: self.q_max]
+            rev = emb[pos : pos + len(reviews)]
+            pos += len(reviews)
+            key = hashlib.sha1("\x1f".join(reviews).encode("utf-8")).digest()
+            if key not in self._cluster_memo:  # events of one venue often share reviews
+                self._cluster_memo[key] = review_representation(rev.reshape(len(reviews), emb.shape[1]), self.b, self.gamma, self.q_max, self.seed)
+            R, has = self._cluster_memo[key]
+            self._vectors[ev.event_id] = EventVectors(z=z, R=R, has_reviews=has)
+        self.timings["cluster_s"] += time.perf_counter() - t0
+        if self.verbose:
+            print(
+                f"event features: {len(todo)} events, {len(self._cluster_memo)} distinct review sets clustered "
+                f"(embed {self.timings['embed_s']:.1f}s, cluster {self.timings['cluster_s']:.1f}s)",
+                flush=True,
+            )
+
+    def vectors(self, ev) -> EventVectors:
+        if ev.event_id not in self._vectors:
+            self.prepare([ev])
+        return self._vectors[ev.event_id]
+
+    def sector_feature(self, events: Sequence) -> np.ndarray:
+        """F_s = [ẑ_s, R̂_s] for the events active in one sector and hour."""
+        d = self.d
+        out = np.zeros((self.b + 1) * d, dtype=np.float32)
+        if not events:
+            return out
+        vs = [self.vectors(ev) for ev in events]
+        out[:d] = np.mean([v.z for v in vs], axis=0)
+        with_rev = [v.R for v in vs if v.has_reviews]
+        if with_rev:
+            out[d:] = np.mean(with_rev, axis=0).ravel()
+        return out
+
+
+def active_hours(ev, year: int, n_hours: int) -> range:
+    """Hour indices of ``year`` whose hour overlaps the event."""
+    start = dt.datetime(year, 1, 1)
+    first = int((ev.start - start).total_seconds() // 3600)
+    # last hour h with h_start < end
+    end_s = (ev.end - start).total_seconds()
+    last = int(np.ceil(end_s / 3600.0)) - 1
+    if ev.end <= ev.start:
+        last = first
+    return range(max(first, 0), min(last, n_hours - 1) + 1)
+
+
+def events_by_hour_sector(events: Sequence, year: int, n_hours: int, n_sectors: int) -> dict[tuple[int, int], list]:
+    out: dict[tuple[int, int], list] = {}
+    for ev in events:
+        s = int(ev.sector)
+        if not 0 <= s < n_sectors:
+            continue
+        for h in active_hours(ev, year, n_hours):
+            out.setdefault((h, s), []).append(ev)
+    return out
+
+
+def active_events(world, when: dt.datetime) -> list:
+    """Events active in the hour beginning at ``when`` (``world.events_active`` when the world has it)."""
+    fn = getattr(world, "events_active", None)
+    if callable(fn):
+        return list(fn(when))
+    return [ev for ev in world.events if ev.active(when)]

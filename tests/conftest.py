@@ -1,0 +1,46 @@
+"""Shared fixtures: tiny hand-built cities and the real data directory."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from city.graph import City
+
+SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _isolated_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Keep test artefacts out of the user's cache, but share them across the session."""
+    os.environ.setdefault("SURGE_CACHE", str(tmp_path_factory.mktemp("surge-cache")))
+
+
+def line_city(n: int = 5, two_way: bool = True, sectors: int = 1) -> City:
+    """Nodes 0..n-1 on a line (a ring when one-way, so it stays strongly connected)."""
+    u = list(range(n - 1))
+    v = list(range(1, n))
+    if two_way:
+        u, v = u + v, v + u
+    else:
+        u.append(n - 1)
+        v.append(0)
+    xy = np.column_stack([np.arange(n) * 100.0, np.zeros(n)])
+    node_sector = (np.arange(n) * sectors // n).astype(np.int32)
+    lengths = np.full(len(u), 100.0)
+    return City.build("line", xy, np.array(u), np.array(v), lengths, node_sector, [f"s{k}" for k in range(sectors)])
+
+
+@pytest.fixture
+def line5() -> City:
+    return line_city(5)
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"{SHARED_DATA} not found")
+    return SHARED_DATA

@@ -1,0 +1,96 @@
+"""Baselines, the registry, and the auction against the Hungarian algorithm."""
+
+from __future__ import annotations
+
+import datetime as dt
+
+import numpy as np
+import pytest
+from scipy.optimize import linear_sum_assignment
+
+from agents.auction import auction_assignment
+from agents.base import EpisodeContext, make_policy, policy_names
+from agents.ia import ble_match
+from city.errors import ConfigError
+from city.sim import PICKUP, FleetSim, Requests
+from coordinator.evaluate import run_episode
+from tests.conftest import line_city
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (3, 3), (5, 8), (12, 12), (20, 35), (40, 60)])
+def test_auction_matches_hungarian(shape: tuple[int, int]) -> None:
+    rng = np.random.default_rng(shape[0] * 100 + shape[1])
+    for _ in range(5):
+        benefit = rng.integers(0, 1000, size=shape)
+        a = auction_assignment(benefit)
+        assert len(set(a.tolist())) == shape[0]
+        rows, cols = linear_sum_assignment(benefit, maximize=True)
+        assert benefit[np.arange(shape[0]), a].sum() == benefit[rows, cols].sum()
+
+
+def test_auction_with_ties_and_negative_benefits() -> None:
+    benefit = np.array([[5, 5, 5], [5, 5, 5], [-3, -3, 7]])
+    a = auction_assignment(benefit)
+    rows, cols = linear_sum_assignment(benefit, maximize=True)
+    assert benefit[np.arange(3), a].sum() == benefit[rows, cols].sum()
+
+
+def test_auction_rejects_bad_input() -> None:
+    with pytest.raises(ValueError, match="transpose"):
+        auction_assignment(np.zeros((3, 2), dtype=int))
+    with pytest.raises(ValueError, match="integers"):
+        auction_assignment(np.zeros((2, 2)))
+
+
+def test_ble_match_takes_closest_pairs_first() -> None:
+    d = np.array([[1, 5], [2, 9]])
+    rows, cols = ble_match(d)
+    assert list(zip(rows.tolist(), cols.tolist())) == [(0, 0), (1, 1)]
+
+
+def test_unknown_policy_is_a_config_error() -> None:
+    with pytest.raises(ConfigError, match="unknown policy 'nope'"):
+        make_policy("nope", line_city(3))
+    assert {"greedy", "ia", "oracle"} <= set(policy_names())
+
+
+def _context(city, minutes: int) -> EpisodeContext:
+    return EpisodeContext(city=city, date=dt.date(2022, 11, 17), hour=19, minutes=minutes, seed=0)
+
+
+def test_greedy_heads_for_nearest_and_picks_up() -> None:
+    city = line_city(7)
+    r = Requests.sorted(np.array([5, 1]), np.array([6, 0]), np.array([0, 0]))
+    sim = FleetSim(city, r, np.array([3, 0]))
+    u = make_policy("greedy", city).act(sim.observe())
+    assert u.tolist() == [4, 1]  # taxi 0: nodes 5 and 1 both 2 hops away, the older request wins
+    sim.step(u)
+    u = make_policy("greedy", city).act(sim.observe())
+    assert u.tolist() == [5, PICKUP]
+
+
+def test_ia_does_not_send_two_taxis_to_one_request() -> None:
+    city = line_city(7)
+    r = Requests.sorted(np.array([3, 6]), np.array([0, 0]), np.array([0, 0]))
+    sim = FleetSim(city, r, np.array([2, 4]))
+    greedy = make_policy("greedy", city).act(sim.observe())
+    ia = make_policy("ia", city).act(sim.observe())
+    assert greedy.tolist() == [3, 3]
+    assert ia.tolist() == [3, 5]
+
+
+def test_oracle_prepositions_for_future_requests() -> None:
+    city = line_city(9)
+    r = Requests.sorted(np.array([8]), np.array([0]), np.array([4]))
+    res = {}
+    for name in ("greedy", "oracle"):
+        res[name] = run_episode(city, make_policy(name, city), r, np.array([0]), _context(city, 12))
+    assert res["oracle"].total_cost == 4  # drives 8 hops, request waits from minute 4 to 8
+    assert res["greedy"].total_cost == 8  # starts driving at minute 4 and is still on its way at the end
+    assert res["greedy"].served == 0
+
+
+def test_oracle_requires_future() -> None:
+    city = line_city(3)
+    with pytest.raises(ConfigError, match="future"):
+        make_policy("oracle", city).reset(_context(city, 5))
