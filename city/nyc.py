@@ -18,7 +18,7 @@ import json
 import math
 import re
 import warnings
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -173,14 +173,14 @@ def read_street_csv(nodes_path: Path, edges_path: Path) -> tuple[np.ndarray, np.
     u_id, v_id, length = edges.ints("u"), edges.ints("v"), edges.floats("length")
     if len(length) and (np.isnan(length).any() or (length < 0).any()):
         bad = int(np.flatnonzero(np.isnan(length) | (length < 0))[0])
-        raise DataError(f"column 'length': {edges.col('length')[bad]!r} is not a non-negative length", path=edges_path, row=int(edges.lines[bad]))
+        raise edges.error(bad, f"column 'length': {edges.col('length')[bad]!r} is not a non-negative length")
     sorted_ids = osmid[order]
     idx = []
     for name, ids in (("u", u_id), ("v", v_id)):
         pos = np.clip(np.searchsorted(sorted_ids, ids), 0, max(len(sorted_ids) - 1, 0))
         missing = np.flatnonzero(sorted_ids[pos] != ids) if len(sorted_ids) else np.arange(len(ids))
         if len(missing):
-            raise DataError(f"column '{name}': node {ids[missing[0]]} is not in {nodes_path.name}", path=edges_path, row=int(edges.lines[missing[0]]))
+            raise edges.error(int(missing[0]), f"column '{name}': node {ids[missing[0]]} is not in {nodes_path.name}")
         idx.append(order[pos])
     return osmid, xy, idx[0], idx[1], length
 
@@ -263,7 +263,7 @@ def read_taxi_zones(zone_dir: Path) -> tuple[dict[int, shapely.Geometry], dict[i
     return polygons, names, path.name
 
 
-def _read_shapefile(path: Path) -> tuple[list[tuple[dict, dict]], object]:
+def _read_shapefile(path: Path) -> tuple[list[tuple[dict, dict]], Callable[[np.ndarray], np.ndarray] | None]:
     """Records and geometries of a shapefile, and the transform to lon/lat its ``.prj`` implies."""
     import shapefile
 
@@ -280,7 +280,7 @@ def _read_shapefile(path: Path) -> tuple[list[tuple[dict, dict]], object]:
     return features, transform
 
 
-def lcc_inverse_from_prj(wkt: str, path: Path | None = None):
+def lcc_inverse_from_prj(wkt: str, path: Path | None = None) -> Callable[[np.ndarray], np.ndarray] | None:
     """A function mapping projected ``(n, 2)`` coordinates to lon/lat, from ESRI ``.prj`` WKT.
 
     Geographic WKT (``GEOGCS`` only) gives ``None`` (no transform); ``PROJCS``
@@ -394,10 +394,7 @@ class CsvTable:
 
     def require(self, names: Iterable[str]) -> None:
         """Raise a :class:`DataError` on line 1 unless every column in ``names`` exists."""
-        missing = [c for c in names if c not in self.columns]
-        if missing:
-            found = ", ".join(self.columns) or "nothing"
-            raise DataError(f"missing column(s) {', '.join(map(repr, missing))} (found: {found})", path=self.path, row=1)
+        _require_columns(self.path, list(self.columns), names)
 
     def col(self, name: str) -> list[str]:
         return self.columns[name]
@@ -459,7 +456,7 @@ def read_csv(path: Path, required: list[str], *, header: bool = True) -> CsvTabl
                 names = [c.strip() for c in next(reader, [])]
             else:
                 names = list(required)
-            CsvTable(path, dict.fromkeys(names), np.zeros(0)).require(required)
+            _require_columns(path, names, required)
             rows: list[list[str]] = []
             lines: list[int] = []
             start = reader.line_num + 1
@@ -474,6 +471,12 @@ def read_csv(path: Path, required: list[str], *, header: bool = True) -> CsvTabl
             raise DataError(f"not a readable CSV file ({exc})", path=path, row=reader.line_num or None) from None
     columns = {name: [r[k].strip() for r in rows] for k, name in enumerate(names)}
     return CsvTable(path, columns, np.array(lines, dtype=np.int64))
+
+
+def _require_columns(path: Path, found: list[str], names: Iterable[str]) -> None:
+    missing = [c for c in names if c not in found]
+    if missing:
+        raise DataError(f"missing column(s) {', '.join(map(repr, missing))} (found: {', '.join(found) or 'nothing'})", path=path, row=1)
 
 
 _OFFSET = re.compile(r"(Z|[+-]\d\d:?\d\d)$")

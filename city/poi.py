@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 
-from city.errors import DataError
 from city.occupancy import LOCALE_TYPES
 
 

@@ -14,6 +14,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
 
 from city.errors import DataError
 from city.graph import City
@@ -59,10 +62,6 @@ def read_fhvhv(paths: Path | str | Iterable[Path | str], city: City) -> TripTabl
     sectors through ``city.sector_ids``; trips starting or ending outside the
     city's zones are dropped.
     """
-    import pyarrow as pa
-    import pyarrow.compute as pc
-    import pyarrow.parquet as pq
-
     if isinstance(paths, (str, Path)):
         paths = [paths]
     lookup = np.full(int(city.sector_ids.max()) + 2, -1, dtype=np.int32)
@@ -81,7 +80,7 @@ def read_fhvhv(paths: Path | str | Iterable[Path | str], city: City) -> TripTabl
         try:
             for batch in pfile.iter_batches(batch_size=BATCH_ROWS, columns=list(FHVHV_COLUMNS)):
                 n_read += batch.num_rows
-                when = pc.coalesce(*(_local_minutes(batch.column(c), path, c) for c in FHVHV_COLUMNS[:2]))
+                when = pc.coalesce(*(_local_seconds(batch.column(c), path, c) for c in FHVHV_COLUMNS[:2]))
                 ids = [_zone_ids(batch.column(c), path, c) for c in FHVHV_COLUMNS[2:]]
                 pu, do = (lookup[np.clip(z, -1, len(lookup) - 1)] for z in ids)
                 keep = (pu >= 0) & (do >= 0) & when.is_valid().to_numpy(zero_copy_only=False)
@@ -100,11 +99,8 @@ def read_fhvhv(paths: Path | str | Iterable[Path | str], city: City) -> TripTabl
     )
 
 
-def _local_minutes(column, path: Path, name: str):
-    """A timestamp column as naive local minutes (TLC writes naive local times)."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
+def _local_seconds(column: pa.Array, path: Path, name: str) -> pa.Array:
+    """A timestamp column as naive local time in seconds (TLC writes naive local times)."""
     if not pa.types.is_timestamp(column.type):
         raise DataError(f"column '{name}' is {column.type}, expected a timestamp", path=path)
     if column.type.tz is not None:
@@ -112,11 +108,8 @@ def _local_minutes(column, path: Path, name: str):
     return column.cast(pa.timestamp("s"), safe=False)
 
 
-def _zone_ids(column, path: Path, name: str) -> np.ndarray:
+def _zone_ids(column: pa.Array, path: Path, name: str) -> np.ndarray:
     """A LocationID column as int64, nulls as -1."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
     if not pa.types.is_integer(column.type):
         raise DataError(f"column '{name}' is {column.type}, expected integer zone ids", path=path)
     return pc.fill_null(column.cast(pa.int64()), -1).to_numpy()

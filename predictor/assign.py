@@ -1,0 +1,61 @@
+"""Demand assignment (paper §4.2.2): sector demand → intersections, and β.
+
+* ρ, δ: ``O(j, h) = Σ_λ n_λ(j) · p_λ(h) · o_λ`` from the world's locale counts
+  and the occupancy schedules of :mod:`city.occupancy`, normalised over each
+  sector's pickup intersections.  The paper uses the same O for pickup and
+  drop-off, so ρ = δ here.
+* β: relative frequency of drop-off sector given pickup sector in historical
+  trips.  From a :class:`city.trips.TripTable` when one is given; otherwise
+  from the world's own requests on ``days`` randomly drawn days of the
+  training months (all 24 hours of each).  Pickup sectors without trips get a
+  uniform row.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+
+import numpy as np
+
+from city.occupancy import day_type, occupancy, sector_distribution
+from predictor.dataset import TRAIN_MONTHS
+
+
+def node_distribution(city, locale_counts: np.ndarray, when: dt.datetime) -> np.ndarray:
+    """p(ρ = j) = p(δ = j) within each sector, shape ``(n,)``; sums to 1 over each sector."""
+    weights = occupancy(np.asarray(locale_counts), when.hour, day_type(when.date()))
+    return sector_distribution(weights, np.asarray(city.node_sector), int(city.n_sectors), np.asarray(city.pickup, bool))
+
+
+def od_frequencies(pickup_sector: np.ndarray, dropoff_sector: np.ndarray, n_sectors: int) -> np.ndarray:
+    counts = np.bincount(
+        np.asarray(pickup_sector, np.int64) * n_sectors + np.asarray(dropoff_sector, np.int64), minlength=n_sectors * n_sectors
+    ).reshape(n_sectors, n_sectors).astype(np.float64)
+    totals = counts.sum(axis=1, keepdims=True)
+    return np.where(totals > 0, counts / np.maximum(totals, 1.0), 1.0 / n_sectors)
+
+
+def estimate_beta(world, *, days: int = 28, seed: int = 0, trips=None) -> tuple[np.ndarray, dict]:
+    """β ``(S, S)`` (rows sum to 1) and a description of where it came from."""
+    city = world.city
+    S = int(city.n_sectors)
+    if trips is not None:
+        beta = od_frequencies(trips.pickup_sector, trips.dropoff_sector, S)
+        return beta, {"source": "trip table", "trips": int(len(trips.pickup_sector))}
+    year = int(world.year)
+    first = dt.date(year, 1, 1)
+    n_train_days = (dt.date(year, TRAIN_MONTHS + 1, 1) - first).days
+    rng = np.random.default_rng(seed)
+    picks = sorted(rng.choice(n_train_days, size=min(days, n_train_days), replace=False).tolist())
+    pu: list[np.ndarray] = []
+    do: list[np.ndarray] = []
+    for k in picks:
+        date = first + dt.timedelta(days=int(k))
+        for hour in range(24):
+            req = world.requests(date, hour, minutes=60)
+            pu.append(np.asarray(city.node_sector)[np.asarray(req.pickup, np.int64)])
+            do.append(np.asarray(city.node_sector)[np.asarray(req.dropoff, np.int64)])
+    p = np.concatenate(pu) if pu else np.zeros(0, np.int64)
+    d = np.concatenate(do) if do else np.zeros(0, np.int64)
+    beta = od_frequencies(p, d, S)
+    return beta, {"source": "world requests", "days": len(picks), "trips": int(len(p)), "months": f"1-{TRAIN_MONTHS}"}

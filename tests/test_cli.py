@@ -1,0 +1,61 @@
+"""The command line: clear one-line errors with exit code 2, and real runs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from coordinator.cli import main
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "coordinator.cli", *args], capture_output=True, text=True, timeout=600)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["evaluate", "--policies", "greedy", "teleport"], "unknown policy 'teleport'"),
+        (["evaluate", "--scenario", "atlantis"], "unknown scenario 'atlantis'"),
+        (["evaluate", "--scenario", "nyc"], "needs --data DIR"),
+        (["evaluate", "--scenario", "nyc", "--data", "/nonexistent/dir"], "data directory /nonexistent/dir does not exist"),
+    ],
+)
+def test_bad_options_give_one_line_and_exit_2(args: list[str], message: str, capsys: pytest.CaptureFixture) -> None:
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("args", [["evaluate", "--hours", "25"], ["evaluate", "--seeds", "0"], ["evaluate", "--date", "2022-13-01"]])
+def test_bad_flag_values_are_rejected_by_argparse(args: list[str]) -> None:
+    proc = run_cli(*args)
+    assert proc.returncode == 2
+    assert "error:" in proc.stderr.splitlines()[-1]
+
+
+def test_every_subcommand_has_help() -> None:
+    for sub in (["evaluate"], ["city"], ["demand"], ["demo"], ["bench", "city"], ["bench", "sim"]):
+        proc = run_cli(*sub, "--help")
+        assert proc.returncode == 0, proc.stderr
+        assert "usage: surge" in proc.stdout
+
+
+def test_evaluate_small_run_writes_results_json(tmp_path: Path) -> None:
+    out = tmp_path / "r.json"
+    proc = run_cli("evaluate", "--hours", "19", "--seeds", "2", "--taxis", "20", "--minutes", "15",
+                   "--policies", "greedy", "ia", "oracle", "--json", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert "[6/6]" not in proc.stderr and "[2/2]" in proc.stderr  # progress per instance
+    doc = json.loads(out.read_text())
+    assert doc["schema"] == "surge.results/1" and doc["scenario"] == "synthetic"
+    assert set(doc["city"]) == {"intersections", "streets", "sectors"}
+    assert len(doc["episodes"]) == 6
+    ep = doc["episodes"][0]
+    assert set(ep) >= {"hour", "seed", "policy", "total_cost", "outstanding_end", "served",
+                       "wait_overhead_per_served", "plan_seconds_per_step", "decisions_sha256"}
+    assert "oracle" in proc.stdout and "total cost" in proc.stdout

@@ -1,0 +1,233 @@
+"""Tests of the demand predictor on a tiny stand-in world (small settings, < 2 min on 2 cores)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from city.events import Event
+from city.graph import City
+from city.sim import Requests
+from city.weather import HourlyWeather, hours_in_year
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+# --------------------------------------------------------------- stand-in world
+class TinyWorld:
+    """A 4x4 grid in 2 sectors, a year of counts, and a few evening events with reviews."""
+
+    def __init__(self, year: int = 2022, seed: int = 0) -> None:
+        rng = np.random.default_rng(seed)
+        side = 4
+        xy = np.array([(i % side, i // side) for i in range(side * side)], dtype=float) * 100
+        u, v = [], []
+        for i in range(side * side):
+            x, y = i % side, i // side
+            if x + 1 < side:
+                u += [i, i + 1]
+                v += [i + 1, i]
+            if y + 1 < side:
+                u += [i, i + side]
+                v += [i + side, i]
+        node_sector = (xy[:, 0] >= 200).astype(int)
+        self.city = City.build("tiny", xy, np.array(u), np.array(v), np.full(len(u), 100.0), node_sector, ["west", "east"])
+        self.year, self.seed = year, seed
+        H = hours_in_year(year)
+        hrs = np.arange(H) % 24
+        self.weather = HourlyWeather(year, 50 + 20 * np.sin(np.arange(H) / H * 2 * np.pi), rng.exponential(0.01, H), rng.uniform(0, 15, H), "tiny")
+        self.locale_counts = rng.integers(0, 4, size=(self.city.n_nodes, 4)).astype(float)
+        base = 20 + 15 * np.sin((hrs - 6) / 24 * 2 * np.pi).clip(0)
+        rate = np.stack([base, 0.6 * base], axis=1)
+        good = ["Amazing show, loved every minute", "Fantastic performance and great seats", "Best night out in years"]
+        bad = ["Terrible sound, long lines", "Overpriced and crowded", "Disappointing, would not return"]
+        self.events: list[Event] = []
+        for k, day in enumerate(range(3, 360, 4)):
+            big = k % 2 == 0
+            start = dt.datetime(year, 1, 1) + dt.timedelta(days=day, hours=18)
+            ev = Event(
+                event_id=f"e{k}",
+                title=("Sold-out stadium concert" if big else "Quiet poetry reading"),
+                description=("Huge crowds expected" if big else "A small gathering"),
+                category="concerts",
+                start=start,
+                end=start + dt.timedelta(hours=2),
+                sector=0,
+                node=0,
+                venue_id="v0" if big else "v1",
+                reviews=tuple((good if big else bad) * 3),
+                attendance=2000.0 if big else 50.0,
+            )
+            self.events.append(ev)
+            h0 = day * 24 + 18
+            rate[h0 : h0 + 2, 0] *= 3.0 if big else 1.1
+        self._rate = rate
+        self._counts = rng.poisson(rate)
+
+    def hour_index(self, when: dt.datetime) -> int:
+        return (when.date() - dt.date(self.year, 1, 1)).days * 24 + when.hour
+
+    def hourly_counts(self) -> np.ndarray:
+        return self._counts
+
+    def expected_rate(self) -> np.ndarray:
+        return self._rate
+
+    def events_active(self, when: dt.datetime) -> list[Event]:
+        return [ev for ev in self.events if ev.active(when)]
+
+    def requests(self, date: dt.date, hour: int, minutes: int = 60) -> Requests:
+        h = self.hour_index(dt.datetime.combine(date, dt.time(hour)))
+        rng = np.random.default_rng(h)
+        n = int(self._counts[h].sum() * minutes / 60)
+        pick = rng.integers(0, self.city.n_nodes, n)
+        drop = rng.integers(0, self.city.n_nodes, n)
+        return Requests.sorted(pick, drop, rng.integers(0, minutes, n))
+
+
+@pytest.fixture(scope="module")
+def world() -> TinyWorld:
+    return TinyWorld()
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("surge-cache")
+
+
+# --------------------------------------------------------------------- tests
+def test_cli_import_is_light() -> None:
+    code = "import sys, argparse, predictor, predictor.cli; p=argparse.ArgumentParser(); predictor.cli.add_parser(p.add_subparsers()); assert 'torch' not in sys.modules, 'torch imported'"
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+def test_holidays_2022() -> None:
+    from predictor.holidays import us_federal_holidays
+
+    h = us_federal_holidays(2022)
+    for d in (dt.date(2022, 1, 17), dt.date(2022, 5, 30), dt.date(2022, 6, 20), dt.date(2022, 7, 4), dt.date(2022, 9, 5), dt.date(2022, 11, 24), dt.date(2022, 12, 26)):
+        assert d in h, d
+    assert dt.date(2022, 7, 5) not in h
+
+
+def test_embedding_offline_and_cached(cache: Path) -> None:
+    from predictor.embed import Embedder
+
+    emb = Embedder(None, cache)
+    v = emb.embed(["The Knicks beat the Celtics at the Garden", "A quiet poetry reading in a small bookstore", "The Knicks beat the Celtics at the Garden"])
+    assert v.shape == (3, 384) and v.dtype == np.float32
+    assert not np.allclose(v[0], v[1])
+    assert np.array_equal(v[0], v[2])
+    assert emb.stats["embedded"] == 2  # de-duplicated
+    again = Embedder(None, cache)
+    w = again.embed(["A quiet poetry reading in a small bookstore"])
+    assert again.stats["embedded"] == 0 and again._model is None  # served from disk, model never loaded
+    assert np.array_equal(w[0], v[1])
+
+
+def test_spectral_clustering_recovers_planted_clusters() -> None:
+    from predictor.cluster import review_representation, spectral_labels
+
+    rng = np.random.default_rng(1)
+    centres = rng.normal(size=(3, 384))
+    centres /= np.linalg.norm(centres, axis=1, keepdims=True)
+    sizes = [12, 10, 8]
+    pts = np.vstack([c + 0.02 * rng.normal(size=(n, 384)) for c, n in zip(centres, sizes)])
+    truth = np.repeat([0, 1, 2], sizes)
+    perm = rng.permutation(len(pts))
+    pts, truth = pts[perm], truth[perm]
+    labels = spectral_labels(pts)
+    from sklearn.metrics import adjusted_rand_score
+
+    assert adjusted_rand_score(truth, labels) == 1.0
+    R, has = review_representation(pts.astype(np.float32))
+    assert has and R.shape == (3, 384)
+    for slot, c in enumerate([0, 1, 2]):  # largest cluster first
+        assert np.allclose(R[slot], pts[truth == c].mean(axis=0), atol=1e-5)
+    # fewer reviews than clusters: each its own cluster, then the mean
+    R2, has2 = review_representation(pts[:2].astype(np.float32))
+    assert has2 and np.allclose(R2[0], pts[0]) and np.allclose(R2[2], pts[:2].mean(axis=0), atol=1e-6)
+    R0, has0 = review_representation(np.zeros((0, 384), np.float32))
+    assert not has0 and not R0.any()
+
+
+def test_tiny_network_loss_falls(tmp_path: Path) -> None:
+    from predictor.train import TrainConfig, fit
+
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(2000, 8)).astype(np.float32)
+    y = (X @ rng.normal(size=8)).astype(np.float32)
+    cfg = TrainConfig(epochs=4, lr=1e-3, batch_size=64, seed=0)
+    res = fit("tiny", X, y, (32, 32), cfg, checkpoint=tmp_path / "ck.pt", log=None)
+    assert res.losses[-1] < 0.5 * res.losses[0]
+    # resume: a run that stopped after 2 epochs and resumed equals the straight run
+    fit("tiny", X, y, (32, 32), TrainConfig(epochs=2, lr=1e-3, seed=0), checkpoint=tmp_path / "ck2.pt", log=None)
+    res2 = fit("tiny", X, y, (32, 32), cfg, checkpoint=tmp_path / "ck2.pt", log=None)
+    assert res2.resumed_from == 2
+    assert np.allclose(res2.losses, res.losses)
+
+
+@pytest.fixture(scope="module")
+def trained(world: TinyWorld, cache: Path, tmp_path_factory) -> Path:
+    from predictor.model import train_model
+    from predictor.train import TrainConfig
+
+    out = tmp_path_factory.mktemp("model")
+    train_model(world, out, cfg=TrainConfig(epochs=2, lr=1e-3, seed=0), cache_dir=str(cache), standard_hidden=(32, 32), event_hidden=(64, 64), scenario={"name": "tiny"}, beta_days=3, log=None)
+    return out
+
+
+def test_saved_model_predicts_identically(world: TinyWorld, trained: Path, cache: Path) -> None:
+    from predictor.dataset import build_year_data
+    from predictor.evaluate import evaluate, predictions
+    from predictor.model import DemandModel
+
+    m1 = DemandModel.load(trained)
+    m2 = DemandModel.load(trained)
+    data = build_year_data(world, m1.featurizer(str(cache)))
+    p1, p2 = predictions(m1, data), predictions(m2, data)
+    for k in p1:
+        assert np.array_equal(p1[k], p2[k])
+    assert (p1["event_nn"] != p1["standard_nn"]).any()
+    res = evaluate(m1, data)
+    assert [r["hour"] for r in res["rows"]] == list(range(15, 22))
+    assert all(r["n"] > 0 and np.isfinite(r["pe_event_nn"]) for r in res["rows"])
+
+
+def test_forecast_and_assignment(world: TinyWorld, trained: Path, cache: Path) -> None:
+    from predictor.forecast import load_forecaster
+
+    fc = load_forecaster(trained, cache_dir=str(cache))
+    when = world.events[-1].start  # an event hour in the test months
+    f = fc.forecast(world, when)
+    get = (lambda k: f[k]) if isinstance(f, dict) else (lambda k: getattr(f, k))
+    eta, rho, delta, beta = get("eta"), get("rho"), get("delta"), get("beta")
+    S, n = world.city.n_sectors, world.city.n_nodes
+    assert eta.shape == (S,) and (eta >= 0).all()
+    assert rho.shape == (n,) and delta.shape == (n,)
+    for s in range(S):
+        sel = world.city.node_sector == s
+        assert rho[sel].sum() == pytest.approx(1.0)
+        assert delta[sel].sum() == pytest.approx(1.0)
+    assert beta.shape == (S, S) and np.allclose(beta.sum(axis=1), 1.0)
+
+
+def test_malformed_event_file_clear_error(tmp_path: Path, world: TinyWorld) -> None:
+    import city.events as events
+
+    read_events = getattr(events, "read_events", None)
+    if read_events is None:
+        pytest.skip("city.events.read_events not written yet")
+    from city.errors import DataError
+
+    bad = tmp_path / "events.csv"
+    bad.write_text("event_id,title,start,end\nx1,Concert,not-a-date,2022-01-01 20:00\n")
+    with pytest.raises(DataError) as info:
+        read_events(bad, world.city)
+    msg = str(info.value)
+    assert "events.csv" in msg and "row" in msg, msg
