@@ -105,7 +105,7 @@ EVENT_COLUMNS: tuple[str, ...] = ("event_id", "title", "description", "category"
 
 def read_reviews(path: Path | str) -> dict[str, list[str]]:
     """Reviews by event id from a CSV ``event_id,review``; empty reviews are skipped, at most Q kept."""
-    from city.nyc import read_csv
+    from city.csvio import read_csv
 
     table = read_csv(Path(path), ["event_id", "review"])
     out: dict[str, list[str]] = {}
@@ -131,7 +131,7 @@ def read_events(
     DataError
         A missing field, unknown category, bad time or position, naming file and row.
     """
-    from city.nyc import nearest_nodes
+    from city.csvio import nearest_nodes
 
     path = Path(path)
     records = _json_records(path) if _is_json(path) else _csv_records(path)
@@ -180,7 +180,7 @@ def _is_json(path: Path) -> bool:
 
 
 def _csv_records(path: Path) -> list[tuple[int, dict]]:
-    from city.nyc import read_csv
+    from city.csvio import read_csv
 
     table = read_csv(path, list(EVENT_COLUMNS))
     names = list(table.columns)
@@ -368,7 +368,7 @@ def read_permitted_events(path: Path | str, city: City, borough: str = "Manhatta
     with a warning giving the count. Descriptions and reviews are empty;
     categories come from :data:`PERMIT_CATEGORIES`.
     """
-    from city.nyc import nearest_nodes, parse_times, read_csv
+    from city.csvio import nearest_nodes, parse_times, read_csv
 
     path = Path(path)
     table = read_csv(path, list(PERMIT_COLUMNS))

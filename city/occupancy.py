@@ -119,7 +119,7 @@ def read_occupancy_csv(path: Path | str) -> dict[str, dict[str, tuple[float, ...
     DataError
         Naming the file and row of a bad value, or the locale/day type missing.
     """
-    from city.nyc import read_csv
+    from city.csvio import read_csv
 
     path = Path(path)
     table = read_csv(path, ["schedule", "day_type", *HOUR_COLUMNS])

@@ -76,7 +76,7 @@ def read_poi_csv(path: Path | str, borough: int | None = 1) -> Pois:
     DataError
         Bad WKT, coordinates or kind, naming the file and row.
     """
-    from city.nyc import read_csv
+    from city.csvio import read_csv
 
     path = Path(path)
     table = read_csv(path, [])

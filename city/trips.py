@@ -20,7 +20,7 @@ import pyarrow.parquet as pq
 
 from city.errors import DataError
 from city.graph import City
-from city.nyc import nearest_nodes, parse_times, read_csv
+from city.csvio import nearest_nodes, parse_times, read_csv
 from city.weather import hours_in_year
 
 #: Columns of the official HV-FHV schema that the reader needs.

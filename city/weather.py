@@ -61,7 +61,7 @@ def read_weather_csv(path: Path | str, station: str = "LGA", year: int = 2022) -
         Missing columns, non-numeric values or bad times (naming file, row and
         column), or no readings for the station and year.
     """
-    from city.nyc import parse_times, read_csv
+    from city.csvio import parse_times, read_csv
 
     path = Path(path)
     table = read_csv(path, [])

@@ -11,6 +11,7 @@ import datetime as dt
 import json
 import sys
 import time
+import warnings
 from pathlib import Path
 
 from city.errors import SurgeError
@@ -227,7 +228,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _warn_one_line(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+    print(f"surge: warning: {message}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
+    warnings.showwarning = _warn_one_line
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
