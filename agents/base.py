@@ -68,6 +68,8 @@ _LAZY: dict[str, str] = {
     "greedy": "agents.greedy",
     "ia": "agents.ia",
     "oracle": "agents.oracle",
+    "surge": "agents.rollout",
+    "garces2023": "agents.rollout",
 }
 
 

@@ -100,20 +100,49 @@ COMMUNITY: tuple[str, ...] = (
 )
 
 # ---------------------------------------------------------------- cues
-#: Title cues by popularity tier; an empty string means no cue.
-TITLE_CUES: tuple[tuple[str, ...], ...] = (
+_SHOW_CUES: tuple[tuple[str, ...], ...] = (
     ("Community Night", "Free Admission", "Open Rehearsal", ""),
     ("", "", "Weeknight Special"),
     ("", "Live", "Now Playing"),
     ("Limited Engagement", "Extended Run", "Encore Performance", "By Popular Demand"),
     ("Sold-Out", "Sold-Out Performance", "Record-Breaking Run", "Sold-Out Crowd Expected"),
 )
+_GAME_CUES: tuple[tuple[str, ...], ...] = (
+    ("Community Night", "Youth Night", ""),
+    ("", "", "Weeknight Game"),
+    ("", "Live", "Game Night"),
+    ("Rivalry Night", "Playoff Push", "Marquee Matchup"),
+    ("Sold-Out", "Sold-Out Crowd Expected", "Standing Room Only"),
+)
+_FAIR_CUES: tuple[tuple[str, ...], ...] = (
+    ("Community Day", "Free Admission", ""),
+    ("", "", "Weekday Pass"),
+    ("", "Live", "Now Open"),
+    ("Expanded Show Floor", "Record Lineup", "By Popular Demand"),
+    ("Sold-Out", "Sold-Out Passes", "Record Attendance Expected"),
+)
+#: Title cues by category and popularity tier; an empty string means no cue.
+TITLE_CUES: dict[str, tuple[tuple[str, ...], ...]] = {
+    "performing-arts": _SHOW_CUES,
+    "concerts": _SHOW_CUES,
+    "community": (
+        ("Community Night", "Free Admission", ""),
+        ("", "", "All Welcome"),
+        ("", "Monthly Meetup", ""),
+        ("Special Edition", "Annual Gathering"),
+        ("Record Turnout Expected", "Sold-Out"),
+    ),
+    "sports": _GAME_CUES,
+    "expos": _FAIR_CUES,
+    "conferences": _FAIR_CUES,
+    "festivals": _FAIR_CUES,
+}
 POPULARITY_PHRASES: tuple[tuple[str, ...], ...] = (
     ("A quiet evening with limited seating.", "A small gathering, free and open to neighbours.",
      "A low-key event; only a handful of people are expected.", "A modest turnout is expected."),
-    ("Plenty of seats are still available.", "A relaxed, uncrowded event.", "Tickets are easy to get."),
+    ("Plenty of tickets are still available.", "A relaxed, uncrowded event.", "Tickets are easy to get."),
     ("A popular choice with good availability.", "Steady ticket sales so far.", "A solid crowd is expected."),
-    ("Very popular: only a few seats are left.", "Strong ticket sales and a near-capacity crowd expected.",
+    ("Very popular: only a few tickets are left.", "Strong ticket sales and a near-capacity crowd expected.",
      "Demand has been high all week."),
     ("Highly anticipated and completely sold out.", "Tickets sold out weeks ago; expect huge crowds.",
      "One of the hottest tickets in town, with a packed house expected."),
@@ -145,6 +174,7 @@ LEADS: dict[str, tuple[str, ...]] = {
     "community": ("{t}: a neighbourhood community event hosted by local volunteers.",
                   "{t} for local residents; all are welcome.", "{t}: a small community gathering in the neighbourhood."),
 }
+#: What reviewers talk about, per category (plural nouns end in "s" and take "were").
 THINGS: dict[str, tuple[str, ...]] = {
     "performing-arts": ("cast", "songs", "staging", "costumes", "lead actress", "orchestra", "choreography", "second act"),
     "sports": ("game", "atmosphere", "fourth quarter", "home team", "seats", "defense", "crowd energy", "overtime"),
@@ -158,13 +188,13 @@ POS_ADJ = ("amazing", "fantastic", "incredible", "wonderful", "superb", "outstan
            "unforgettable", "spectacular", "phenomenal", "excellent")
 NEU_ADJ = ("decent", "okay", "alright", "average", "fine", "so-so", "standard", "reasonable", "fair")
 NEG_ADJ = ("terrible", "awful", "disappointing", "boring", "mediocre", "underwhelming", "dull", "sloppy", "painful")
-POS_TEMPLATES = ("{A} {x}!", "The {x} was {a}.", "Loved the {x}, {a} from start to finish.",
-                 "Would absolutely come back, the {x} was {a}.", "Best night out in ages, {a} {x}.",
-                 "Highly recommend it. The {x} was {a}.")
-NEU_TEMPLATES = ("The {x} was {a}.", "It was okay, the {x} was {a}.", "Decent {x}, nothing special.",
-                 "Average experience overall; the {x} was {a}.", "Not bad, not great. {A} {x}.")
-NEG_TEMPLATES = ("The {x} was {a}.", "Disappointing {x}, would not recommend.", "Waste of money, the {x} was {a}.",
-                 "Overpriced and the {x} was {a}.", "Left early. {A} {x}.", "Really {a} {x}, skip it.")
+POS_TEMPLATES = ("{A} {x}!", "The {x} {be} {a}.", "Loved the {x}, {a} from start to finish.",
+                 "Would absolutely come back, the {x} {be} {a}.", "Best night out in ages, {a} {x}.",
+                 "Highly recommend it. The {x} {be} {a}.")
+NEU_TEMPLATES = ("The {x} {be} {a}.", "It was okay, the {x} {be} {a}.", "Decent {x}, nothing special.",
+                 "Average experience overall; the {x} {be} {a}.", "Not bad, not great. {A} {x}.")
+NEG_TEMPLATES = ("The {x} {be} {a}.", "Disappointing {x}, would not recommend.", "Waste of money, the {x} {be} {a}.",
+                 "Overpriced and the {x} {be} {a}.", "Left early. {A} {x}.", "Really {a} {x}, skip it.")
 BIG_CROWD = ("Huge crowds outside afterwards.", "The line to get in went around the block.",
              "Traffic around the venue was a nightmare.", "Impossible to get a cab after it ended.",
              "Packed house, every seat taken.", "Streets were jammed before it started.",
@@ -186,17 +216,17 @@ def conference_name(rng: random.Random, year: int) -> str:
     return f"{rng.choice(CONF_TOPICS)} {rng.choice(CONF_FORMATS)} {year}"
 
 
-def title(rng: random.Random, name: str, popularity: float, cue: str | None = None) -> str:
+def title(rng: random.Random, category: str, name: str, popularity: float, cue: str | None = None) -> str:
     """Event title: the name plus a popularity cue (a given ``cue`` such as ``Opening Night`` wins)."""
     if cue is None:
-        cue = rng.choice(TITLE_CUES[popularity_tier(popularity)])
+        cue = rng.choice(TITLE_CUES[category][popularity_tier(popularity)])
     return f"{name} - {cue}" if cue else name
 
 
-def venue_phrase(venue_name: str, kind: str, capacity: int) -> str:
+def venue_phrase(venue_name: str, kind: str, capacity: int, unit: str = "seat") -> str:
     """Where, and how big: seat counts let text alone tell a club from an arena."""
     size = "an intimate" if capacity < 500 else "a large" if capacity >= 5000 else "a"
-    return f"At {venue_name}, {size} {capacity:,}-seat {kind}."
+    return f"At {venue_name}, {size} {capacity:,}-{unit} {kind}."
 
 
 def description(
@@ -250,7 +280,9 @@ def reviews(
     for kind in kinds:
         templates, adjs = ((POS_TEMPLATES, POS_ADJ), (NEU_TEMPLATES, NEU_ADJ), (NEG_TEMPLATES, NEG_ADJ))[kind]
         a = rng.choice(adjs)
-        text = rng.choice(templates).format(x=rng.choice(things), a=a, A=a.capitalize())
+        x = rng.choice(things)
+        be = "were" if x.endswith("s") and x != "sound" else "was"
+        text = rng.choice(templates).format(x=x, be=be, a=a, A=a.capitalize())
         u = rng.random()
         if u < crowd_p:
             text += " " + rng.choice(BIG_CROWD)

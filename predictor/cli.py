@@ -156,7 +156,8 @@ def eval_main(args) -> int:
     world, _ = load_world(
         sc["name"], args.data or sc.get("data_dir"), seed=int(sc.get("world_seed", 0)), year=int(sc.get("year", 2022)), events=sc.get("events"), reviews=sc.get("reviews"), trips=sc.get("trips")
     )
-    data = build_year_data(world, model.featurizer(args.cache), verbose=False)
+    lead, lag = model.window
+    data = build_year_data(world, model.featurizer(args.cache), lead=lead, lag=lag, verbose=False)
     result = evaluate(model, data)
     result["model"] = str(Path(args.model).resolve())
     result["scenario"] = sc

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from predictor.features import (
+    LAG_HOURS,
+    LEAD_HOURS,
     EventFeaturizer,
     events_by_hour_sector,
     temporal_matrix,
@@ -61,7 +63,7 @@ def world_counts(world) -> np.ndarray:
     return np.asarray(world.hourly_counts(), dtype=np.float64)
 
 
-def build_year_data(world, featurizer: EventFeaturizer, *, verbose: bool = False) -> YearData:
+def build_year_data(world, featurizer: EventFeaturizer, *, lead: int = LEAD_HOURS, lag: int = LAG_HOURS, verbose: bool = False) -> YearData:
     t0 = time.perf_counter()
     year = int(world.year)
     S = int(world.city.n_sectors)
@@ -75,7 +77,7 @@ def build_year_data(world, featurizer: EventFeaturizer, *, verbose: bool = False
 
     events = list(world.events)
     featurizer.prepare(events)
-    groups = events_by_hour_sector(events, year, H, S)
+    groups = events_by_hour_sector(events, year, H, S, lead, lag)
     keys = sorted(groups)
     E = len(keys)
     F = np.zeros((E, featurizer.size), dtype=np.float32)

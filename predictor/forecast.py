@@ -77,7 +77,8 @@ class ModelForecaster:
             raise ValueError(f"model was trained on {self.model.n_sectors} sectors, world has {S}")
         when = when.replace(minute=0, second=0, microsecond=0)
         by_sector: dict[int, list] = {}
-        for ev in active_events(world, when):
+        lead, lag = self.model.window
+        for ev in active_events(world, when, lead, lag):
             if 0 <= int(ev.sector) < S:
                 by_sector.setdefault(int(ev.sector), []).append(ev)
         has = np.zeros(S, dtype=bool)

@@ -32,7 +32,7 @@ from predictor.dataset import (
     standard_training_set,
 )
 from predictor.embed import Embedder
-from predictor.features import EventFeaturizer, N_TEMPORAL, WEATHER_NAMES, temporal_features, temporal_names, weather_at
+from predictor.features import LAG_HOURS, LEAD_HOURS, EventFeaturizer, N_TEMPORAL, WEATHER_NAMES, temporal_features, temporal_names, weather_at
 from predictor.nets import EVENT_HIDDEN, STANDARD_HIDDEN, DemandMLP, configure_threads
 from predictor.train import TrainConfig, fit, predict, versions
 
@@ -119,6 +119,11 @@ class DemandModel:
         beta = np.load(directory / "beta.npy") if (directory / "beta.npy").exists() else None
         return cls(meta, norm, standard, event, beta, directory)
 
+    @property
+    def window(self) -> tuple[int, int]:
+        f = self.meta["features"]
+        return int(f.get("lead_hours", 0)), int(f.get("lag_hours", 0))
+
     def featurizer(self, cache_dir: str | None = None, verbose: bool = False) -> EventFeaturizer:
         f = self.meta["features"]
         emb = Embedder(self.meta["encoder"]["name"], cache_dir or self.meta.get("cache_dir"), verbose=verbose)
@@ -150,6 +155,8 @@ def train_model(
     q_max: int = Q_MAX,
     event_epochs: int | None = None,
     beta_days: int = 28,
+    lead_hours: int = LEAD_HOURS,
+    lag_hours: int = LAG_HOURS,
     log: Callable[[str], None] | None = print,
     data: YearData | None = None,
 ) -> DemandModel:
@@ -166,7 +173,7 @@ def train_model(
     embedder = Embedder(encoder, cache_dir, verbose=log is not None)
     featurizer = EventFeaturizer(embedder, n_clusters=n_clusters, gamma=gamma, q_max=q_max, seed=0, verbose=log is not None)
     if data is None:
-        data = build_year_data(world, featurizer, verbose=log is not None)
+        data = build_year_data(world, featurizer, lead=lead_hours, lag=lag_hours, verbose=log is not None)
     norm = Normaliser.fit(data)
 
     Xs, ys = standard_training_set(data, norm)
@@ -208,6 +215,9 @@ def train_model(
             "gamma": gamma,
             "q_max": q_max,
             "cluster_seed": 0,
+            "lead_hours": lead_hours,
+            "lag_hours": lag_hours,
+            "event_window": "an event counts for its venue's sector in every hour overlapping [start - lead_hours, end + lag_hours)",
             "clustering": "SpectralClustering(affinity='rbf', gamma, assign_labels='cluster_qr'); clusters ordered by size, then first member",
         },
         "networks": {

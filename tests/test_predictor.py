@@ -189,7 +189,7 @@ def test_saved_model_predicts_identically(world: TinyWorld, trained: Path, cache
 
     m1 = DemandModel.load(trained)
     m2 = DemandModel.load(trained)
-    data = build_year_data(world, m1.featurizer(str(cache)))
+    data = build_year_data(world, m1.featurizer(str(cache)), lead=m1.window[0], lag=m1.window[1])
     p1, p2 = predictions(m1, data), predictions(m2, data)
     for k in p1:
         assert np.array_equal(p1[k], p2[k])

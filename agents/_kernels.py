@@ -1,0 +1,534 @@
+"""Compiled inner loops of the one-agent-at-a-time rollout (numba, ``cache=True``).
+
+The rollout of one agent scores each of its candidate controls by Monte-Carlo
+simulation of the base policy.  Everything here is a pure function of its
+array arguments; random numbers come from a counter-based generator keyed by
+``(key, sample, minute, sector)``, so a sample's requests do not depend on the
+thread that draws them, on the order samples are drawn in, or on which other
+sectors are drawn (pruning skips sectors without changing the rest).
+
+Conventions shared with :mod:`agents.rollout`:
+
+* Requests of a rollout have *codes*: ``0 … R0-1`` are the requests
+  outstanding at the decision minute, oldest first; ``R0 + a`` is the a-th
+  sampled arrival, in arrival order.  A smaller code is an older request, so
+  ``(distance, code)`` ordering reproduces the simulator's oldest-first
+  tie-breaks.
+* ``near[v, :near_len]`` lists the outstanding requests nearest to node ``v``
+  by ``(dist[v, pickup], code)``; when ``truncated`` it holds only the first
+  ``K`` of them and searches fall back to a scan of ``rel_list``.
+* A taxi is *free from step* ``tfree``: a taxi that picks up at step ``k``
+  with trip length ``τ`` is free from step ``k + 1 + τ`` at its drop-off.  Busy
+  taxis cannot act, so their intermediate positions are not tracked.
+* Step 0 is the decision minute (its joint control is fixed per candidate);
+  steps ``1 … H`` run the base policy on sampled arrivals.  The cost of a
+  rollout is ``Σ_{k=0..H} g_k + g_H``: the stage costs plus the terminal cost
+  (requests still outstanding at the end).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import get_num_threads, njit, prange
+
+PICKUP = -1
+GREEDY = 0
+IA = 1
+LIMITED_CE = 0
+STANDARD_CE = 1
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_S30 = np.uint64(30)
+_S27 = np.uint64(27)
+_S31 = np.uint64(31)
+_S11 = np.uint64(11)
+_INV53 = 1.0 / 9007199254740992.0
+_BIG = 1 << 30
+
+
+@njit(cache=True, inline="always")
+def _mix(z: np.uint64) -> np.uint64:
+    """The splitmix64 finaliser."""
+    z = (z ^ (z >> _S30)) * _M1
+    z = (z ^ (z >> _S27)) * _M2
+    return z ^ (z >> _S31)
+
+
+@njit(cache=True)
+def stream_key(seed: int, t: int, agent: int) -> np.uint64:
+    """The 64-bit random key of one agent's decision at minute ``t``."""
+    z = _mix(np.uint64(seed & 0x7FFFFFFFFFFFFFFF) + _GOLDEN)
+    z = _mix(z ^ (np.uint64(t & 0x7FFFFFFFFFFFFFFF) + _GOLDEN))
+    return _mix(z ^ (np.uint64(agent & 0x7FFFFFFFFFFFFFFF) + _GOLDEN))
+
+
+@njit(cache=True, inline="always")
+def _stream(key: np.uint64, sample: int, minute: int, sector: int) -> np.uint64:
+    z = _mix(key ^ (np.uint64(sample) * _M1 + _GOLDEN))
+    z = _mix(z ^ (np.uint64(minute) * _M2 + _GOLDEN))
+    return _mix(z ^ (np.uint64(sector) * _M1 + _M2))
+
+
+@njit(cache=True, inline="always")
+def _next(state: np.uint64) -> tuple[np.uint64, float]:
+    state = state + _GOLDEN
+    return state, float(_mix(state) >> _S11) * _INV53
+
+
+@njit(cache=True, inline="always")
+def _search(cum: np.ndarray, lo: int, hi: int, u: float) -> int:
+    """First index ``i`` in ``[lo, hi)`` with ``cum[i] > u · cum[hi-1]`` (inverse CDF)."""
+    x = u * cum[hi - 1]
+    a, b = lo, hi - 1
+    while a < b:
+        mid = (a + b) >> 1
+        if cum[mid] > x:
+            b = mid
+        else:
+            a = mid + 1
+    return a
+
+
+@njit(cache=True)
+def arrival_count(mode: int, rate: float, minute: int, u: float) -> int:
+    """Requests entering a sector in one minute under certainty equivalence.
+
+    ``LIMITED_CE`` (surge): ``round(rate)`` when ``rate ≥ 1`` (halves round up),
+    else one request with probability ``rate``.  ``STANDARD_CE`` (Garces et
+    al.): deterministic mean arrivals, one request each time the rounded
+    cumulative mean ``⌊rate · m + ½⌋`` steps up, ``m`` counting minutes from
+    the forecast hour's start.
+    """
+    if mode == LIMITED_CE:
+        if rate >= 1.0:
+            return int(np.floor(rate + 0.5))
+        return 1 if u < rate else 0
+    return int(np.floor(rate * (minute + 1) + 0.5) - np.floor(rate * minute + 0.5))
+
+
+@njit(cache=True)
+def sample_arrivals(
+    key: np.uint64,
+    sample: int,
+    horizon: int,
+    minute0: int,
+    mode: int,
+    sectors: np.ndarray,
+    eta: np.ndarray,
+    pk_ptr: np.ndarray,
+    pk_node: np.ndarray,
+    pk_cum: np.ndarray,
+    dk_ptr: np.ndarray,
+    dk_node: np.ndarray,
+    dk_cum: np.ndarray,
+    beta_cum: np.ndarray,
+    rel_node: np.ndarray,
+    out_pick: np.ndarray,
+    out_drop: np.ndarray,
+    out_step: np.ndarray,
+) -> int:
+    """Draw one sample's future requests for steps ``1 … horizon``; return how many were kept.
+
+    For each step ``k`` and each sector ``q`` of ``sectors`` (ascending), the
+    stream ``(key, sample, k, q)`` gives first the count draw, then three
+    uniforms per request: pickup node (inverse CDF of ``pk_*`` in ``q``),
+    drop-off sector (row ``q`` of ``beta_cum``) and drop-off node (``dk_*``).
+    Requests whose pickup is not in ``rel_node`` are drawn but not kept.
+    ``minute0`` is the decision step's minute since the forecast hour began.
+    """
+    n = 0
+    for k in range(1, horizon + 1):
+        for qi in range(sectors.shape[0]):
+            q = sectors[qi]
+            st = _stream(key, sample, k, q)
+            st, u = _next(st)
+            cnt = arrival_count(mode, eta[q], minute0 + k, u)
+            for _ in range(cnt):
+                st, u1 = _next(st)
+                st, u2 = _next(st)
+                st, u3 = _next(st)
+                p = pk_node[_search(pk_cum, pk_ptr[q], pk_ptr[q + 1], u1)]
+                if not rel_node[p]:
+                    continue
+                q2 = _search(beta_cum[q], 0, beta_cum.shape[1], u2)
+                out_pick[n] = p
+                out_drop[n] = dk_node[_search(dk_cum, dk_ptr[q2], dk_ptr[q2 + 1], u3)]
+                out_step[n] = k
+                n += 1
+    return n
+
+
+@njit(cache=True)
+def nearest_lists(dist: np.ndarray, pickups: np.ndarray, k: int) -> np.ndarray:
+    """For every node, the ``k`` requests nearest to it by ``(dist[v, pickup], index)``; -1 pads."""
+    n = dist.shape[0]
+    r0 = pickups.shape[0]
+    kk = min(k, r0)
+    out = np.full((n, k), -1, dtype=np.int32)
+    keys = np.empty(kk, dtype=np.int64)
+    for v in range(n):
+        m = 0
+        for r in range(r0):
+            key = np.int64(dist[v, pickups[r]]) * r0 + r
+            if m == kk and key >= keys[kk - 1]:
+                continue
+            j = m if m < kk else kk - 1
+            while j > 0 and keys[j - 1] > key:
+                keys[j] = keys[j - 1]
+                j -= 1
+            keys[j] = key
+            if m < kk:
+                m += 1
+        for j in range(kk):
+            out[v, j] = keys[j] % r0
+    return out
+
+
+@njit(cache=True, inline="always")
+def _pick_node(code: int, r0: int, req_pick: np.ndarray, a_pick: np.ndarray) -> int:
+    return req_pick[code] if code < r0 else a_pick[code - r0]
+
+
+@njit(cache=True)
+def _nearest(
+    v: int,
+    lb: int,
+    alive: np.ndarray,
+    act: np.ndarray,
+    n_act: int,
+    near: np.ndarray,
+    near_len: int,
+    truncated: bool,
+    rel_list: np.ndarray,
+    req_pick: np.ndarray,
+    a_pick: np.ndarray,
+    dist: np.ndarray,
+) -> tuple[int, int, int]:
+    """The alive request nearest to node ``v`` by ``(distance, code)``: ``(BIG, -1)`` if none.
+
+    ``lb`` is a lower bound on the distance from ``v`` to every alive sampled
+    arrival (negative when unknown).  Arrivals are younger than every
+    outstanding request, so when the nearest outstanding request is no farther
+    than ``lb`` the arrivals are not scanned.  Returns ``(distance, code, lb')``
+    with ``lb'`` the bound after the call (exact when the arrivals were scanned).
+    """
+    r0 = req_pick.shape[0]
+    best_d = _BIG
+    best_c = -1
+    found = False
+    for j in range(near_len):
+        r = near[v, j]
+        if alive[r]:
+            best_d = np.int64(dist[v, req_pick[r]])
+            best_c = r
+            found = True
+            break
+    if not found and truncated:
+        for j in range(rel_list.shape[0]):
+            r = rel_list[j]
+            if alive[r]:
+                d = np.int64(dist[v, req_pick[r]])
+                if d < best_d:
+                    best_d = d
+                    best_c = r
+    if lb >= 0 and lb >= best_d:
+        return best_d, best_c, lb
+    arr_d = _BIG
+    for j in range(n_act):
+        c = act[j]
+        if alive[c]:
+            d = np.int64(dist[v, a_pick[c - r0]])
+            if d < arr_d:
+                arr_d = d
+            if d < best_d or (d == best_d and c < best_c):
+                best_d = d
+                best_c = c
+    return best_d, best_c, arr_d
+
+
+@njit(cache=True)
+def _oldest_at(
+    v: int,
+    alive: np.ndarray,
+    act: np.ndarray,
+    n_act: int,
+    near: np.ndarray,
+    near_len: int,
+    truncated: bool,
+    rel_list: np.ndarray,
+    req_pick: np.ndarray,
+    a_pick: np.ndarray,
+    dist: np.ndarray,
+) -> int:
+    """Code of the oldest alive request waiting at node ``v``, or -1."""
+    r0 = req_pick.shape[0]
+    scanned_all = True
+    for j in range(near_len):
+        r = near[v, j]
+        if dist[v, req_pick[r]] != 0:
+            scanned_all = False
+            break
+        if alive[r]:
+            return r
+    if scanned_all and truncated:
+        for j in range(rel_list.shape[0]):
+            r = rel_list[j]
+            if alive[r] and req_pick[r] == v:
+                return r
+    best = -1
+    for j in range(n_act):
+        c = act[j]
+        if alive[c] and a_pick[c - r0] == v and (best < 0 or c < best):
+            best = c
+    return best
+
+
+@njit(cache=True)
+def step_zero(
+    controls: np.ndarray,
+    pos: np.ndarray,
+    tau: np.ndarray,
+    dest: np.ndarray,
+    req_pick: np.ndarray,
+    req_drop: np.ndarray,
+    near: np.ndarray,
+    dist: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Apply each row of ``controls`` (one joint control per candidate) at the decision minute.
+
+    Returns, per candidate row, the alive flags of the outstanding requests,
+    and every taxi's node and first free step afterwards (busy taxis: their
+    destination and remaining trip time).
+    """
+    n_c, m = controls.shape
+    r0 = req_pick.shape[0]
+    near_len = min(near.shape[1], r0)
+    truncated = r0 > near.shape[1]
+    all_reqs = np.arange(r0).astype(np.int32)
+    no_act = np.empty(0, dtype=np.int32)
+    no_pick = np.empty(0, dtype=np.int32)
+    alive = np.ones((n_c, r0), dtype=np.bool_)
+    pos1 = np.empty((n_c, m), dtype=np.int32)
+    tfree1 = np.empty((n_c, m), dtype=np.int32)
+    for c in range(n_c):
+        al = alive[c]
+        for i in range(m):
+            if tau[i] > 0:
+                pos1[c, i] = dest[i]
+                tfree1[c, i] = tau[i]
+            elif controls[c, i] == PICKUP:
+                r = _oldest_at(pos[i], al, no_act, 0, near, near_len, truncated, all_reqs, req_pick, no_pick, dist)
+                if r >= 0:
+                    al[r] = False
+                    trip = max(1, np.int64(dist[pos[i], req_drop[r]]))
+                    pos1[c, i] = req_drop[r]
+                    tfree1[c, i] = 1 + trip
+                else:
+                    pos1[c, i] = pos[i]
+                    tfree1[c, i] = 1
+            else:
+                pos1[c, i] = controls[c, i]
+                tfree1[c, i] = 1
+    return alive, pos1, tfree1
+
+
+@njit(cache=True)
+def _simulate(
+    base: int,
+    horizon: int,
+    alive: np.ndarray,
+    n_alive: int,
+    tpos: np.ndarray,
+    tfree: np.ndarray,
+    n_arr: int,
+    a_pick: np.ndarray,
+    a_drop: np.ndarray,
+    a_step: np.ndarray,
+    req_pick: np.ndarray,
+    req_drop: np.ndarray,
+    near: np.ndarray,
+    near_len: int,
+    truncated: bool,
+    rel_list: np.ndarray,
+    dist: np.ndarray,
+    next_hop: np.ndarray,
+    act: np.ndarray,
+    lb: np.ndarray,
+    free: np.ndarray,
+    best_d: np.ndarray,
+    best_c: np.ndarray,
+    target: np.ndarray,
+    matched: np.ndarray,
+) -> int:
+    """Run the base policy for steps ``1 … horizon``; return ``Σ g_k + g_H`` over those steps.
+
+    ``lb[i]`` bounds taxi ``i``'s distance to the alive arrivals from below
+    (see :func:`_nearest`): it drops by one when the taxi moves a hop, takes
+    the distance to each new arrival, and is unknown (-1) after a pickup.
+    """
+    r0 = req_pick.shape[0]
+    mt = tpos.shape[0]
+    n_act = 0
+    ai = 0
+    cost = 0
+    for i in range(mt):
+        lb[i] = -1
+    for k in range(1, horizon + 1):
+        while ai < n_arr and a_step[ai] == k:
+            act[n_act] = r0 + ai
+            n_act += 1
+            n_alive += 1
+            p = a_pick[ai]
+            for i in range(mt):
+                if lb[i] >= 0:
+                    d = np.int64(dist[tpos[i], p])
+                    if d < lb[i]:
+                        lb[i] = d
+            ai += 1
+        nf = 0
+        for i in range(mt):
+            if tfree[i] <= k:
+                free[nf] = i
+                target[nf] = -1
+                nf += 1
+        if nf > 0 and n_alive > 0:
+            for f in range(nf):
+                i = free[f]
+                d, c, lb[i] = _nearest(tpos[i], lb[i], alive, act, n_act, near, near_len, truncated, rel_list, req_pick, a_pick, dist)
+                best_d[f] = d
+                best_c[f] = c
+            if base == GREEDY:
+                for f in range(nf):
+                    target[f] = best_c[f]
+            else:
+                # Broadcast of local eligibility: commit the globally closest (distance, taxi, request)
+                # pair, retire both, refresh the taxis that wanted that request, repeat.
+                n_m = 0
+                while True:
+                    sel = -1
+                    for f in range(nf):
+                        if target[f] < 0 and best_c[f] >= 0 and (sel < 0 or best_d[f] < best_d[sel]):
+                            sel = f
+                    if sel < 0:
+                        break
+                    c = best_c[sel]
+                    target[sel] = c
+                    alive[c] = False
+                    matched[n_m] = c
+                    n_m += 1
+                    for f in range(nf):
+                        if target[f] < 0 and best_c[f] == c:
+                            i = free[f]
+                            d, c2, lb[i] = _nearest(tpos[i], lb[i], alive, act, n_act, near, near_len, truncated, rel_list, req_pick, a_pick, dist)
+                            best_d[f] = d
+                            best_c[f] = c2
+                for j in range(n_m):
+                    alive[matched[j]] = True
+            for f in range(nf):
+                c = target[f]
+                if c < 0:
+                    continue
+                i = free[f]
+                v = tpos[i]
+                p = _pick_node(c, r0, req_pick, a_pick)
+                if p != v:
+                    tpos[i] = next_hop[v, p]
+                    if lb[i] > 0:
+                        lb[i] -= 1
+                    continue
+                r = _oldest_at(v, alive, act, n_act, near, near_len, truncated, rel_list, req_pick, a_pick, dist)
+                if r < 0:
+                    continue
+                alive[r] = False
+                n_alive -= 1
+                drop = req_drop[r] if r < r0 else a_drop[r - r0]
+                tpos[i] = drop
+                tfree[i] = k + 1 + max(1, np.int64(dist[v, drop]))
+                lb[i] = -1
+                if r >= r0:
+                    for j in range(n_act):
+                        if act[j] == r:
+                            act[j] = act[n_act - 1]
+                            n_act -= 1
+                            break
+        cost += n_alive
+    return cost + n_alive
+
+
+@njit(cache=True, parallel=True)
+def rollout_costs(
+    base: int,
+    horizon: int,
+    n_samples: int,
+    key: np.uint64,
+    minute0: int,
+    mode: int,
+    alive0: np.ndarray,
+    g0: np.ndarray,
+    pos1: np.ndarray,
+    tfree1: np.ndarray,
+    req_pick: np.ndarray,
+    req_drop: np.ndarray,
+    near: np.ndarray,
+    rel_list: np.ndarray,
+    rel_node: np.ndarray,
+    sectors: np.ndarray,
+    eta: np.ndarray,
+    pk_ptr: np.ndarray,
+    pk_node: np.ndarray,
+    pk_cum: np.ndarray,
+    dk_ptr: np.ndarray,
+    dk_node: np.ndarray,
+    dk_cum: np.ndarray,
+    beta_cum: np.ndarray,
+    max_arrivals: int,
+    dist: np.ndarray,
+    next_hop: np.ndarray,
+) -> np.ndarray:
+    """Rollout cost of every candidate (rows of ``alive0``/``pos1``/``tfree1``) in every sample.
+
+    Each sample's arrivals are drawn once and shared by all candidates
+    (common random numbers).  Samples run in parallel in contiguous chunks
+    with per-chunk scratch space; the result does not depend on the number
+    of threads.
+    """
+    n_c = alive0.shape[0]
+    r0 = req_pick.shape[0]
+    mt = pos1.shape[1]
+    near_len = min(near.shape[1], r0)
+    truncated = r0 > near.shape[1]
+    out = np.empty((n_c, n_samples), dtype=np.int32)
+    n_chunks = min(n_samples, 8 * get_num_threads())
+    cap = max(max_arrivals, 1)
+    for chunk in prange(n_chunks):
+        a_pick = np.empty(cap, dtype=np.int32)
+        a_drop = np.empty(cap, dtype=np.int32)
+        a_step = np.empty(cap, dtype=np.int32)
+        alive = np.empty(r0 + cap, dtype=np.bool_)
+        act = np.empty(cap, dtype=np.int32)
+        tpos = np.empty(mt, dtype=np.int32)
+        tfree = np.empty(mt, dtype=np.int32)
+        lb = np.empty(mt, dtype=np.int64)
+        free = np.empty(mt, dtype=np.int32)
+        best_d = np.empty(mt, dtype=np.int64)
+        best_c = np.empty(mt, dtype=np.int64)
+        target = np.empty(mt, dtype=np.int64)
+        matched = np.empty(mt, dtype=np.int64)
+        for s in range(chunk * n_samples // n_chunks, (chunk + 1) * n_samples // n_chunks):
+            n_arr = sample_arrivals(
+                key, s, horizon, minute0, mode, sectors, eta, pk_ptr, pk_node, pk_cum,
+                dk_ptr, dk_node, dk_cum, beta_cum, rel_node, a_pick, a_drop, a_step,
+            )
+            for c in range(n_c):
+                alive[:r0] = alive0[c]
+                alive[r0 : r0 + n_arr] = True
+                tpos[:] = pos1[c]
+                tfree[:] = tfree1[c]
+                out[c, s] = g0[c] + _simulate(
+                    base, horizon, alive, g0[c], tpos, tfree, n_arr, a_pick, a_drop, a_step,
+                    req_pick, req_drop, near, near_len, truncated, rel_list, dist, next_hop,
+                    act, lb, free, best_d, best_c, target, matched,
+                )
+    return out

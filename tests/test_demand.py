@@ -1,0 +1,306 @@
+"""Tests of the demand world: determinism, exact counts, assignment, OD, the evaluation surge, text, records."""
+
+from __future__ import annotations
+
+import datetime as dt
+import re
+import time
+
+import numpy as np
+import pytest
+
+from city.demand import (
+    EVAL_DATE,
+    RecordedWorld,
+    SyntheticWorld,
+    evaluation_date,
+    find_anchors,
+    surge_report,
+    synthetic_weather,
+    synthetic_world,
+)
+from city.errors import ConfigError
+from city.graph import City
+from city.occupancy import LOCALE_TYPES
+from city.poi import Pois
+from city.weather import HourlyWeather, hours_in_year
+
+EVE_19 = dt.datetime.combine(EVAL_DATE, dt.time(19))
+
+
+def grid_city(side: int = 8, names: tuple[str, ...] = ("Times Sq/Theatre District", "Penn Station/Madison Sq West", "Clinton West", "Battery Park")) -> City:
+    """A two-way ``side × side`` grid in four quadrant sectors; the last node of each sector cannot pick up."""
+    xy = np.array([(i % side, i // side) for i in range(side * side)], dtype=float) * 100.0
+    u, v = [], []
+    for i in range(side * side):
+        x, y = i % side, i // side
+        if x + 1 < side:
+            u += [i, i + 1]
+            v += [i + 1, i]
+        if y + 1 < side:
+            u += [i, i + side]
+            v += [i + side, i]
+    half = side // 2 * 100.0
+    sector = (xy[:, 0] >= half).astype(int) + 2 * (xy[:, 1] >= half).astype(int)
+    pickup = np.ones(side * side, dtype=bool)
+    for s in range(4):
+        pickup[np.flatnonzero(sector == s)[-1]] = False
+    return City.build("grid", xy, np.array(u), np.array(v), np.full(len(u), 100.0), sector, list(names), pickup=pickup)
+
+
+@pytest.fixture(scope="module")
+def grid() -> City:
+    return grid_city()
+
+
+@pytest.fixture(scope="module")
+def grid_world(grid: City) -> SyntheticWorld:
+    return synthetic_world(grid, seed=3)
+
+
+@pytest.fixture(scope="module")
+def synth_city() -> City:
+    synthetic = pytest.importorskip("city.synthetic", reason="city/synthetic.py (the embedded map) is not importable yet")
+    return synthetic.synthetic_city(seed=0)
+
+
+@pytest.fixture(scope="module")
+def world(synth_city: City) -> SyntheticWorld:
+    return synthetic_world(synth_city, seed=0)
+
+
+def _counts_by_sector(city: City, nodes: np.ndarray) -> np.ndarray:
+    return np.bincount(city.node_sector[nodes], minlength=city.n_sectors)
+
+
+# ----------------------------------------------------------------- determinism
+def test_same_seed_same_world_and_requests(synth_city: City, world: SyntheticWorld) -> None:
+    again = synthetic_world(synth_city, seed=0)
+    np.testing.assert_array_equal(world.hourly_counts(), again.hourly_counts())
+    np.testing.assert_array_equal(world.expected_rate(), again.expected_rate())
+    assert [(e.title, e.description, e.reviews, e.start) for e in world.events[::97]] == [(e.title, e.description, e.reviews, e.start) for e in again.events[::97]]
+    # Requests depend on the hour, not on what was drawn before.
+    again.requests(dt.date(2022, 3, 1), 8)
+    a, b = world.requests(EVAL_DATE, 19), again.requests(EVAL_DATE, 19)
+    for name in ("pickup", "dropoff", "entry"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def test_different_seed_differs(synth_city: City, world: SyntheticWorld) -> None:
+    other = synthetic_world(synth_city, seed=1)
+    assert not np.array_equal(world.hourly_counts(), other.hourly_counts())
+    assert [e.title for e in world.events[:200]] != [e.title for e in other.events[:200]]
+    assert not np.array_equal(world.requests(EVAL_DATE, 19).pickup, other.requests(EVAL_DATE, 19).pickup)
+
+
+# ----------------------------------------------------------------- requests
+@pytest.mark.parametrize("when", [EVE_19, dt.datetime(2022, 1, 1, 0), dt.datetime(2022, 7, 4, 3), dt.datetime(2022, 12, 31, 23)])
+def test_requests_match_hourly_counts(world: SyntheticWorld, when: dt.datetime) -> None:
+    req = world.requests(when.date(), when.hour)
+    counts = world.hourly_counts()[world.hour_index(when)]
+    np.testing.assert_array_equal(_counts_by_sector(world.city, req.pickup), counts)
+    assert world.city.pickup[req.pickup].all() and world.city.pickup[req.dropoff].all()
+    assert req.entry.min() >= 0 and req.entry.max() < 60 and np.all(np.diff(req.entry) >= 0)
+
+
+def test_requests_window_is_a_prefix_and_spans_hours(world: SyntheticWorld) -> None:
+    full = world.requests(EVAL_DATE, 19)
+    half = world.requests(EVAL_DATE, 19, minutes=30)
+    assert len(half) == int((full.entry < 30).sum())
+    assert set(zip(half.pickup, half.dropoff, half.entry)) <= set(zip(full.pickup, full.dropoff, full.entry))
+    two = world.requests(EVAL_DATE, 19, minutes=120)
+    nxt = world.requests(EVAL_DATE, 20)
+    assert len(two) == len(full) + len(nxt)
+    np.testing.assert_array_equal(np.sort(two.entry[two.entry >= 60] - 60), np.sort(nxt.entry))
+
+
+def test_requests_are_fast(world: SyntheticWorld) -> None:
+    world.requests(EVAL_DATE, 18)
+    t0 = time.perf_counter()
+    for h in range(24):
+        world.requests(dt.date(2022, 5, 5), h)
+    assert (time.perf_counter() - t0) / 24 < 0.05
+
+
+def test_trips_are_short_to_medium(world: SyntheticWorld) -> None:
+    req = world.requests(EVAL_DATE, 17)
+    hops = world.city.dist[req.pickup, req.dropoff].mean()
+    assert 8 <= hops <= 22
+
+
+# ----------------------------------------------------------------- assignment and OD
+@pytest.mark.parametrize("when", [dt.datetime(2022, 2, 2, 3), EVE_19, dt.datetime(2022, 8, 6, 12), dt.datetime(2022, 8, 7, 23)])
+def test_rho_delta_sum_to_one_per_sector(grid_world: SyntheticWorld, when: dt.datetime) -> None:
+    city = grid_world.city
+    for dist in (grid_world.pickup_dist(when), grid_world.dropoff_dist(when)):
+        assert dist.shape == (city.n_nodes,) and np.all(dist >= 0)
+        np.testing.assert_allclose(np.bincount(city.node_sector, weights=dist, minlength=city.n_sectors), 1.0)
+        assert np.all(dist[~city.pickup] == 0) and np.all(dist[city.pickup] > 0)
+
+
+def test_rho_follows_occupancy(world: SyntheticWorld) -> None:
+    """Hotels weigh more at night than at noon (occupancy schedules), so ρ changes with the hour."""
+    night, noon = world.pickup_dist(dt.datetime(2022, 3, 2, 3)), world.pickup_dist(dt.datetime(2022, 3, 2, 12))
+    hotel = world.locale_counts[:, LOCALE_TYPES.index("hotel")]
+    assert hotel @ night > hotel @ noon
+
+
+@pytest.mark.parametrize("when", [dt.datetime(2022, 1, 1, 0), EVE_19, dt.datetime(2022, 6, 8, 23)])
+def test_beta_rows_sum_to_one(world: SyntheticWorld, when: dt.datetime) -> None:
+    beta = world.od_matrix(when)
+    S = world.city.n_sectors
+    assert beta.shape == (S, S) and np.all(beta >= 0)
+    np.testing.assert_allclose(beta.sum(axis=1), 1.0)
+
+
+def test_beta_biased_toward_venue_before_start(world: SyntheticWorld) -> None:
+    arena = world.anchors["arena"]
+    nb = [s for s in world.city.local_sectors(arena) if s != arena]
+    usual = world.od_matrix(dt.datetime(2022, 11, 17, 4))  # no event arrivals at 4 am: plain gravity
+    event = world.od_matrix(EVE_19)
+    assert np.all(event[nb, arena] > usual[nb, arena])
+
+
+# ----------------------------------------------------------------- evaluation surge
+def test_eval_date_is_the_paper_thursday() -> None:
+    assert evaluation_date(2022) == EVAL_DATE == dt.date(2022, 11, 17) and EVAL_DATE.weekday() == 3
+
+
+def test_eval_evening_has_broadway_arena_and_surge(world: SyntheticWorld) -> None:
+    evening = [e for e in world.events if e.start.date() == EVAL_DATE and e.start.hour >= 18]
+    kinds = {v.venue_id: v.kind for v in world.venues}
+    assert any(e.category == "performing-arts" and kinds[e.venue_id] == "theatre" for e in evening)
+    assert any(kinds[e.venue_id] == "arena" for e in evening)
+    report = surge_report(world, EVAL_DATE, 19)
+    assert report[0]["ratio"] >= 3.0 and report[0]["events"]
+    assert [r["ratio"] for r in report] == sorted((r["ratio"] for r in report), reverse=True)
+    assert set(report[0]) == {"sector", "name", "expected", "usual", "ratio", "events"}
+    citywide = world.expected_rate()[world.hour_index(EVE_19)].sum()
+    assert 550 <= citywide <= 750
+
+
+def test_calibration_of_a_typical_weekday(world: SyntheticWorld) -> None:
+    base = world.base_rate()
+    day = dt.date(2022, 11, 9)  # a Wednesday
+    totals = {h: base[world.hour_index(dt.datetime.combine(day, dt.time(h)))].sum() for h in (15, 17, 19, 21)}
+    if world.weather.precip_in[world.hour_index(dt.datetime.combine(day, dt.time(19)))] == 0:
+        assert 380 <= totals[19] <= 460
+    assert totals[15] < totals[17] < totals[19] and totals[21] < totals[19]
+
+
+def test_about_300_venues_and_thousands_of_events(world: SyntheticWorld) -> None:
+    assert 250 <= len(world.venues) <= 350
+    assert len(world.events) >= 2000
+    assert {e.category for e in world.events} == {"conferences", "expos", "concerts", "festivals", "performing-arts", "community", "sports"}
+    starts = [e.start for e in world.events]
+    assert starts == sorted(starts)
+    assert all(0 < len(e.reviews) <= 100 for e in world.events)
+
+
+def test_events_active(world: SyntheticWorld) -> None:
+    active = world.events_active(EVE_19)
+    assert active and all(e.active(EVE_19) for e in active)
+    assert {e.event_id for e in active} == {e.event_id for e in world.events if e.active(EVE_19)}
+
+
+# ----------------------------------------------------------------- text
+def test_text_carries_popularity_category_and_sentiment(world: SyntheticWorld) -> None:
+    events = [e for e in world.events if e.category != "performing-arts"] + world.events[::20]
+    att = np.array([e.attendance for e in events])
+    n_reviews = np.array([len(e.reviews) for e in events])
+    assert np.corrcoef(np.log1p(att), n_reviews)[0, 1] > 0.5
+    hot = re.compile(r"sold.out|hottest|highly anticipated|few tickets|near-capacity", re.IGNORECASE)
+    quiet = re.compile(r"quiet|small gathering|handful|modest turnout|plenty of tickets", re.IGNORECASE)
+    for cat in ("concerts", "community", "sports", "expos"):
+        sel = [e for e in events if e.category == cat]
+        loud = [e.attendance for e in sel if hot.search(e.title + " " + e.description)]
+        calm = [e.attendance for e in sel if quiet.search(e.description)]
+        assert loud and calm and np.median(loud) > 1.5 * np.median(calm), cat
+    vocab = {"sports": "game", "expos": "exhibitor", "concerts": "music", "conferences": "keynote"}
+    for cat, word in vocab.items():
+        sel = [e for e in events if e.category == cat]
+        assert np.mean([word in (e.title + e.description).lower() for e in sel]) > 0.3, cat
+    positive = re.compile(r"amazing|fantastic|incredible|wonderful|superb|outstanding|brilliant|loved", re.IGNORECASE)
+
+    def pos_share(e) -> float:
+        return np.mean([bool(positive.search(r)) for r in e.reviews])
+
+    glowing = [pos_share(e) for e in events if "glowing" in e.description or "rave" in e.description]
+    harsh = [pos_share(e) for e in events if "harsh" in e.description or "poor" in e.description]
+    assert np.mean(glowing) > np.mean(harsh) + 0.2
+
+
+# ----------------------------------------------------------------- options and errors
+def test_demand_scale_and_given_weather(grid: City, grid_world: SyntheticWorld) -> None:
+    H = hours_in_year(2022)
+    dry = HourlyWeather(2022, np.full(H, 60.0), np.zeros(H), np.full(H, 5.0), "test")
+    a = synthetic_world(grid, seed=3, weather=dry)
+    b = synthetic_world(grid, seed=3, weather=dry, demand_scale=2.0)
+    assert a.weather is dry
+    np.testing.assert_allclose(b.expected_rate(), 2 * a.expected_rate())
+    wet = HourlyWeather(2022, np.full(H, 60.0), np.full(H, 0.3), np.full(H, 5.0), "wet")
+    c = synthetic_world(grid, seed=3, weather=wet)
+    assert 1.15 < c.base_rate().sum() / a.base_rate().sum() < 1.35
+
+
+def test_bad_arguments(grid: City, grid_world: SyntheticWorld) -> None:
+    with pytest.raises(ConfigError, match="outside"):
+        grid_world.requests(dt.date(2021, 12, 31), 10)
+    with pytest.raises(ConfigError, match="hour"):
+        grid_world.requests(EVAL_DATE, 24)
+    with pytest.raises(ConfigError, match="minutes"):
+        grid_world.requests(EVAL_DATE, 10, minutes=0)
+    with pytest.raises(ConfigError, match="past the end"):
+        grid_world.requests(dt.date(2022, 12, 31), 23, minutes=61)
+    with pytest.raises(ConfigError, match="outside"):
+        grid_world.hour_index(dt.datetime(2023, 1, 1))
+    with pytest.raises(ConfigError, match="demand_scale"):
+        synthetic_world(grid, demand_scale=0)
+    with pytest.raises(ConfigError, match="weather"):
+        synthetic_world(grid, year=2022, weather=synthetic_weather(2021, 0))
+
+
+def test_anchors_from_info_names_or_size(grid: City, synth_city: City) -> None:
+    assert find_anchors(grid) == {"theater": 0, "arena": 1, "expo": 2, "park": 3}
+    assert find_anchors(synth_city) == {k: synth_city.info["anchors"][k] for k in ("theater", "arena", "expo", "park")}
+    plain = grid_city(names=("a", "b", "c", "d"))
+    assert sorted(find_anchors(plain).values()) == [0, 1, 2, 3]
+
+
+def test_real_pois_without_restaurants(grid: City) -> None:
+    """Restaurant counts are synthesised from retail when the POI file has (almost) none."""
+    xy = grid.xy[::5]
+    pois = Pois(xy[:, 0], xy[:, 1], np.array(["retail", "hotel"] * (len(xy) // 2) + ["retail"] * (len(xy) % 2)), np.array(["p"] * len(xy)))
+    w = synthetic_world(grid, seed=3, pois=pois)
+    retail, restaurant = (w.locale_counts[:, LOCALE_TYPES.index(k)] for k in ("retail", "restaurant"))
+    np.testing.assert_allclose(restaurant, retail)
+    assert any("restaurant" in n for n in w.notes)
+
+
+# ----------------------------------------------------------------- recorded world
+def test_recorded_world_reproduces_its_records(grid: City) -> None:
+    trips_mod = pytest.importorskip("city.trips", reason="city/trips.py is not importable")
+    times = np.array(
+        ["2022-11-17T19:05", "2022-11-17T19:05", "2022-11-17T19:59", "2022-11-17T20:00", "2022-03-01T08:30", "2021-12-31T23:59"],
+        dtype="datetime64[m]",
+    )
+    pu = np.array([0, 1, 1, 3, 2, 0], dtype=np.int32)
+    do = np.array([1, 1, 2, 0, 3, 0], dtype=np.int32)
+    trips = trips_mod.TripTable(request_time=times, pickup_sector=pu, dropoff_sector=do, n_read=6, n_dropped=0)
+    w = RecordedWorld(grid, trips, year=2022, seed=5)
+    counts = w.hourly_counts()
+    h = w.hour_index(EVE_19)
+    np.testing.assert_array_equal(counts[h], [1, 2, 0, 0])
+    assert counts.sum() == 5  # the 2021 record is outside the year
+    np.testing.assert_array_equal(w.expected_rate(), counts)
+    req = w.requests(EVAL_DATE, 19)
+    np.testing.assert_array_equal(np.sort(req.entry), [5, 5, 59])
+    np.testing.assert_array_equal(_counts_by_sector(grid, req.pickup), [1, 2, 0, 0])
+    np.testing.assert_array_equal(np.sort(grid.node_sector[req.dropoff]), [1, 1, 2])
+    again = RecordedWorld(grid, trips, year=2022, seed=5).requests(EVAL_DATE, 19)
+    np.testing.assert_array_equal(req.pickup, again.pickup)
+    beta = w.od_matrix(EVE_19)
+    np.testing.assert_allclose(beta.sum(axis=1), 1.0)
+    np.testing.assert_allclose(beta[1], [0, 0.5, 0.5, 0])
+    assert len(w.requests(dt.date(2022, 3, 1), 8, minutes=20)) == 0 and len(w.requests(dt.date(2022, 3, 1), 8)) == 1
+    assert w.events == [] and w.locale_counts.shape == (grid.n_nodes, 4)
