@@ -29,7 +29,7 @@ Conventions shared with :mod:`agents.rollout`:
 from __future__ import annotations
 
 import numpy as np
-from numba import get_num_threads, njit, prange
+from numba import njit, prange
 
 PICKUP = -1
 GREEDY = 0
@@ -486,13 +486,14 @@ def rollout_costs(
     max_arrivals: int,
     dist: np.ndarray,
     next_hop: np.ndarray,
+    n_chunks: int,
 ) -> np.ndarray:
     """Rollout cost of every candidate (rows of ``alive0``/``pos1``/``tfree1``) in every sample.
 
     Each sample's arrivals are drawn once and shared by all candidates
     (common random numbers).  Samples run in parallel in contiguous chunks
     with per-chunk scratch space; the result does not depend on the number
-    of threads.
+    of threads or chunks.
     """
     n_c = alive0.shape[0]
     r0 = req_pick.shape[0]
@@ -500,7 +501,7 @@ def rollout_costs(
     near_len = min(near.shape[1], r0)
     truncated = r0 > near.shape[1]
     out = np.empty((n_c, n_samples), dtype=np.int32)
-    n_chunks = min(n_samples, 8 * get_num_threads())
+    n_chunks = max(1, min(n_samples, n_chunks))
     cap = max(max_arrivals, 1)
     for chunk in prange(n_chunks):
         a_pick = np.empty(cap, dtype=np.int32)

@@ -56,6 +56,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numba
 import numpy as np
 
 from agents import _kernels as K
@@ -305,7 +306,7 @@ def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np
         alive0, alive0.sum(axis=1).astype(np.int32), np.ascontiguousarray(pos1[:, taxis]), np.ascontiguousarray(tfree1[:, taxis]),
         req_pick, req_drop, ctx.near, np.flatnonzero(rel_node[req_pick]).astype(np.int32), rel_node,
         sectors.astype(np.int64), tab.eta, tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum,
-        tab.beta_cum, max_arr, city.dist, city.next_hop,
+        tab.beta_cum, max_arr, city.dist, city.next_hop, 8 * numba.get_num_threads(),
     )
     return cands, costs
 
