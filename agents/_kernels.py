@@ -161,17 +161,22 @@ def sample_arrivals(
 
 
 @njit(cache=True)
-def nearest_lists(dist: np.ndarray, pickups: np.ndarray, k: int) -> np.ndarray:
-    """For every node, the ``k`` requests nearest to it by ``(dist[v, pickup], index)``; -1 pads."""
+def nearest_lists(dist: np.ndarray, pickups: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """For every node ``v``, the ``k`` requests nearest to it by ``(dist[v, pickup], index)``.
+
+    Returns the request indices and their distances, shape ``(n, min(k, R))`` each.
+    """
     n = dist.shape[0]
     r0 = pickups.shape[0]
     kk = min(k, r0)
-    out = np.full((n, k), -1, dtype=np.int32)
+    idx = np.empty((n, kk), dtype=np.int32)
+    dd = np.empty((n, kk), dtype=np.int16)
     keys = np.empty(kk, dtype=np.int64)
     for v in range(n):
         m = 0
+        row = dist[v]
         for r in range(r0):
-            key = np.int64(dist[v, pickups[r]]) * r0 + r
+            key = np.int64(row[pickups[r]]) * r0 + r
             if m == kk and key >= keys[kk - 1]:
                 continue
             j = m if m < kk else kk - 1
@@ -182,64 +187,107 @@ def nearest_lists(dist: np.ndarray, pickups: np.ndarray, k: int) -> np.ndarray:
             if m < kk:
                 m += 1
         for j in range(kk):
-            out[v, j] = keys[j] % r0
-    return out
+            idx[v, j] = keys[j] % r0
+            dd[v, j] = keys[j] // r0
+    return idx, dd
 
 
-@njit(cache=True, inline="always")
-def _pick_node(code: int, r0: int, req_pick: np.ndarray, a_pick: np.ndarray) -> int:
-    return req_pick[code] if code < r0 else a_pick[code - r0]
+@njit(cache=True)
+def step_zero(
+    controls: np.ndarray,
+    pos: np.ndarray,
+    tau: np.ndarray,
+    dest: np.ndarray,
+    req_pick: np.ndarray,
+    req_drop: np.ndarray,
+    dist: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Apply each row of ``controls`` (one joint control per candidate) at the decision minute.
+
+    Returns, per candidate row, the alive flags of the outstanding requests,
+    and every taxi's node and first free step afterwards (busy taxis: their
+    destination and remaining trip time).
+    """
+    n_c, m = controls.shape
+    r0 = req_pick.shape[0]
+    alive = np.ones((n_c, r0), dtype=np.bool_)
+    pos1 = np.empty((n_c, m), dtype=np.int32)
+    tfree1 = np.empty((n_c, m), dtype=np.int32)
+    for c in range(n_c):
+        for i in range(m):
+            if tau[i] > 0:
+                pos1[c, i] = dest[i]
+                tfree1[c, i] = tau[i]
+                continue
+            pos1[c, i] = pos[i] if controls[c, i] == PICKUP else controls[c, i]
+            tfree1[c, i] = 1
+            if controls[c, i] == PICKUP:
+                for r in range(r0):
+                    if alive[c, r] and req_pick[r] == pos[i]:
+                        alive[c, r] = False
+                        pos1[c, i] = req_drop[r]
+                        tfree1[c, i] = 1 + max(1, np.int64(dist[pos[i], req_drop[r]]))
+                        break
+    return alive, pos1, tfree1
 
 
 @njit(cache=True)
 def _nearest(
     v: int,
     lb: int,
+    seen: int,
+    n_seen: int,
     alive: np.ndarray,
     act: np.ndarray,
     n_act: int,
     near: np.ndarray,
-    near_len: int,
-    truncated: bool,
-    rel_list: np.ndarray,
-    req_pick: np.ndarray,
+    near_d: np.ndarray,
+    e_pick: np.ndarray,
     a_pick: np.ndarray,
     dist: np.ndarray,
 ) -> tuple[int, int, int]:
-    """The alive request nearest to node ``v`` by ``(distance, code)``: ``(BIG, -1)`` if none.
+    """The alive request nearest to node ``v`` by ``(distance, code)``; ``(BIG, -1)`` if none.
 
-    ``lb`` is a lower bound on the distance from ``v`` to every alive sampled
-    arrival (negative when unknown).  Arrivals are younger than every
-    outstanding request, so when the nearest outstanding request is no farther
-    than ``lb`` the arrivals are not scanned.  Returns ``(distance, code, lb')``
-    with ``lb'`` the bound after the call (exact when the arrivals were scanned).
+    ``lb`` bounds from below the distance from ``v`` to the alive arrivals
+    among the first ``seen`` (negative when unknown); ``n_seen`` arrivals
+    have entered.  Arrivals are younger than every outstanding request, so
+    when the nearest outstanding request is no farther than the bound the
+    arrivals are not scanned.  Returns ``(distance, code, bound)``, the bound
+    now covering all ``n_seen`` arrivals (exact when they were scanned).
     """
-    r0 = req_pick.shape[0]
+    r0 = e_pick.shape[0]
     best_d = _BIG
     best_c = -1
-    found = False
-    for j in range(near_len):
+    kl = near.shape[1]
+    for j in range(kl):
         r = near[v, j]
         if alive[r]:
-            best_d = np.int64(dist[v, req_pick[r]])
+            best_d = np.int64(near_d[v, j])
             best_c = r
-            found = True
             break
-    if not found and truncated:
-        for j in range(rel_list.shape[0]):
-            r = rel_list[j]
+    if best_c < 0 and r0 > kl:
+        row = dist[v]
+        for r in range(r0):
             if alive[r]:
-                d = np.int64(dist[v, req_pick[r]])
+                d = np.int64(row[e_pick[r]])
                 if d < best_d:
                     best_d = d
                     best_c = r
-    if lb >= 0 and lb >= best_d:
-        return best_d, best_c, lb
+    if lb >= 0:
+        row = dist[v]
+        for a in range(seen, n_seen):
+            if alive[r0 + a]:
+                d = np.int64(row[a_pick[a]])
+                if d < lb:
+                    lb = d
+        if lb >= best_d:
+            return best_d, best_c, lb
     arr_d = _BIG
+    row = dist[v]
     for j in range(n_act):
         c = act[j]
         if alive[c]:
-            d = np.int64(dist[v, a_pick[c - r0]])
+            d = np.int64(row[a_pick[c - r0]])
             if d < arr_d:
                 arr_d = d
             if d < best_d or (d == best_d and c < best_c):
@@ -255,27 +303,21 @@ def _oldest_at(
     act: np.ndarray,
     n_act: int,
     near: np.ndarray,
-    near_len: int,
-    truncated: bool,
-    rel_list: np.ndarray,
-    req_pick: np.ndarray,
+    near_d: np.ndarray,
+    e_pick: np.ndarray,
     a_pick: np.ndarray,
-    dist: np.ndarray,
 ) -> int:
     """Code of the oldest alive request waiting at node ``v``, or -1."""
-    r0 = req_pick.shape[0]
-    scanned_all = True
-    for j in range(near_len):
-        r = near[v, j]
-        if dist[v, req_pick[r]] != 0:
-            scanned_all = False
-            break
-        if alive[r]:
-            return r
-    if scanned_all and truncated:
-        for j in range(rel_list.shape[0]):
-            r = rel_list[j]
-            if alive[r] and req_pick[r] == v:
+    r0 = e_pick.shape[0]
+    kl = near.shape[1]
+    j = 0
+    while j < kl and near_d[v, j] == 0:
+        if alive[near[v, j]]:
+            return near[v, j]
+        j += 1
+    if j == kl and r0 > kl:
+        for r in range(r0):
+            if alive[r] and e_pick[r] == v:
                 return r
     best = -1
     for j in range(n_act):
@@ -283,55 +325,6 @@ def _oldest_at(
         if alive[c] and a_pick[c - r0] == v and (best < 0 or c < best):
             best = c
     return best
-
-
-@njit(cache=True)
-def step_zero(
-    controls: np.ndarray,
-    pos: np.ndarray,
-    tau: np.ndarray,
-    dest: np.ndarray,
-    req_pick: np.ndarray,
-    req_drop: np.ndarray,
-    near: np.ndarray,
-    dist: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Apply each row of ``controls`` (one joint control per candidate) at the decision minute.
-
-    Returns, per candidate row, the alive flags of the outstanding requests,
-    and every taxi's node and first free step afterwards (busy taxis: their
-    destination and remaining trip time).
-    """
-    n_c, m = controls.shape
-    r0 = req_pick.shape[0]
-    near_len = min(near.shape[1], r0)
-    truncated = r0 > near.shape[1]
-    all_reqs = np.arange(r0).astype(np.int32)
-    no_act = np.empty(0, dtype=np.int32)
-    no_pick = np.empty(0, dtype=np.int32)
-    alive = np.ones((n_c, r0), dtype=np.bool_)
-    pos1 = np.empty((n_c, m), dtype=np.int32)
-    tfree1 = np.empty((n_c, m), dtype=np.int32)
-    for c in range(n_c):
-        al = alive[c]
-        for i in range(m):
-            if tau[i] > 0:
-                pos1[c, i] = dest[i]
-                tfree1[c, i] = tau[i]
-            elif controls[c, i] == PICKUP:
-                r = _oldest_at(pos[i], al, no_act, 0, near, near_len, truncated, all_reqs, req_pick, no_pick, dist)
-                if r >= 0:
-                    al[r] = False
-                    trip = max(1, np.int64(dist[pos[i], req_drop[r]]))
-                    pos1[c, i] = req_drop[r]
-                    tfree1[c, i] = 1 + trip
-                else:
-                    pos1[c, i] = pos[i]
-                    tfree1[c, i] = 1
-            else:
-                pos1[c, i] = controls[c, i]
-                tfree1[c, i] = 1
-    return alive, pos1, tfree1
 
 
 @njit(cache=True)
@@ -346,16 +339,15 @@ def _simulate(
     a_pick: np.ndarray,
     a_drop: np.ndarray,
     a_step: np.ndarray,
-    req_pick: np.ndarray,
-    req_drop: np.ndarray,
+    e_pick: np.ndarray,
+    e_drop: np.ndarray,
     near: np.ndarray,
-    near_len: int,
-    truncated: bool,
-    rel_list: np.ndarray,
+    near_d: np.ndarray,
     dist: np.ndarray,
     next_hop: np.ndarray,
     act: np.ndarray,
     lb: np.ndarray,
+    seen: np.ndarray,
     free: np.ndarray,
     best_d: np.ndarray,
     best_c: np.ndarray,
@@ -364,11 +356,11 @@ def _simulate(
 ) -> int:
     """Run the base policy for steps ``1 … horizon``; return ``Σ g_k + g_H`` over those steps.
 
-    ``lb[i]`` bounds taxi ``i``'s distance to the alive arrivals from below
-    (see :func:`_nearest`): it drops by one when the taxi moves a hop, takes
-    the distance to each new arrival, and is unknown (-1) after a pickup.
+    ``lb[i]`` bounds taxi ``i``'s distance to the alive arrivals among the
+    first ``seen[i]`` from below (see :func:`_nearest`): it drops by one when
+    the taxi moves a hop and is unknown (-1) after a pickup.
     """
-    r0 = req_pick.shape[0]
+    r0 = e_pick.shape[0]
     mt = tpos.shape[0]
     n_act = 0
     ai = 0
@@ -380,12 +372,6 @@ def _simulate(
             act[n_act] = r0 + ai
             n_act += 1
             n_alive += 1
-            p = a_pick[ai]
-            for i in range(mt):
-                if lb[i] >= 0:
-                    d = np.int64(dist[tpos[i], p])
-                    if d < lb[i]:
-                        lb[i] = d
             ai += 1
         nf = 0
         for i in range(mt):
@@ -396,9 +382,8 @@ def _simulate(
         if nf > 0 and n_alive > 0:
             for f in range(nf):
                 i = free[f]
-                d, c, lb[i] = _nearest(tpos[i], lb[i], alive, act, n_act, near, near_len, truncated, rel_list, req_pick, a_pick, dist)
-                best_d[f] = d
-                best_c[f] = c
+                best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
+                seen[i] = ai
             if base == GREEDY:
                 for f in range(nf):
                     target[f] = best_c[f]
@@ -421,29 +406,35 @@ def _simulate(
                     for f in range(nf):
                         if target[f] < 0 and best_c[f] == c:
                             i = free[f]
-                            d, c2, lb[i] = _nearest(tpos[i], lb[i], alive, act, n_act, near, near_len, truncated, rel_list, req_pick, a_pick, dist)
-                            best_d[f] = d
-                            best_c[f] = c2
+                            best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
                 for j in range(n_m):
-                    alive[matched[j]] = True
+                    c = matched[j]
+                    alive[c] = True
+                    if c >= r0:
+                        # The arrival was hidden while bounds were refreshed: bring them back below it.
+                        p = a_pick[c - r0]
+                        for f in range(nf):
+                            i = free[f]
+                            if lb[i] >= 0:
+                                lb[i] = min(lb[i], np.int64(dist[tpos[i], p]))
             for f in range(nf):
                 c = target[f]
                 if c < 0:
                     continue
                 i = free[f]
                 v = tpos[i]
-                p = _pick_node(c, r0, req_pick, a_pick)
+                p = e_pick[c] if c < r0 else a_pick[c - r0]
                 if p != v:
                     tpos[i] = next_hop[v, p]
                     if lb[i] > 0:
                         lb[i] -= 1
                     continue
-                r = _oldest_at(v, alive, act, n_act, near, near_len, truncated, rel_list, req_pick, a_pick, dist)
+                r = _oldest_at(v, alive, act, n_act, near, near_d, e_pick, a_pick)
                 if r < 0:
                     continue
                 alive[r] = False
                 n_alive -= 1
-                drop = req_drop[r] if r < r0 else a_drop[r - r0]
+                drop = e_drop[r] if r < r0 else a_drop[r - r0]
                 tpos[i] = drop
                 tfree[i] = k + 1 + max(1, np.int64(dist[v, drop]))
                 lb[i] = -1
@@ -466,13 +457,12 @@ def rollout_costs(
     minute0: int,
     mode: int,
     alive0: np.ndarray,
-    g0: np.ndarray,
     pos1: np.ndarray,
     tfree1: np.ndarray,
-    req_pick: np.ndarray,
-    req_drop: np.ndarray,
+    e_pick: np.ndarray,
+    e_drop: np.ndarray,
     near: np.ndarray,
-    rel_list: np.ndarray,
+    near_d: np.ndarray,
     rel_node: np.ndarray,
     sectors: np.ndarray,
     eta: np.ndarray,
@@ -490,16 +480,16 @@ def rollout_costs(
 ) -> np.ndarray:
     """Rollout cost of every candidate (rows of ``alive0``/``pos1``/``tfree1``) in every sample.
 
-    Each sample's arrivals are drawn once and shared by all candidates
-    (common random numbers).  Samples run in parallel in contiguous chunks
-    with per-chunk scratch space; the result does not depend on the number
-    of threads or chunks.
+    ``e_pick``/``e_drop`` are the outstanding requests the rollout tracks
+    (codes ``0 … R-1``, oldest first) and ``near``/``near_d`` their
+    :func:`nearest_lists`.  Each sample's arrivals are drawn once and shared
+    by all candidates (common random numbers).  Samples run in parallel in
+    ``n_chunks`` contiguous chunks with per-chunk scratch space; the result
+    does not depend on the number of threads or chunks.
     """
     n_c = alive0.shape[0]
-    r0 = req_pick.shape[0]
+    r0 = e_pick.shape[0]
     mt = pos1.shape[1]
-    near_len = min(near.shape[1], r0)
-    truncated = r0 > near.shape[1]
     out = np.empty((n_c, n_samples), dtype=np.int32)
     n_chunks = max(1, min(n_samples, n_chunks))
     cap = max(max_arrivals, 1)
@@ -512,6 +502,7 @@ def rollout_costs(
         tpos = np.empty(mt, dtype=np.int32)
         tfree = np.empty(mt, dtype=np.int32)
         lb = np.empty(mt, dtype=np.int64)
+        seen = np.zeros(mt, dtype=np.int64)
         free = np.empty(mt, dtype=np.int32)
         best_d = np.empty(mt, dtype=np.int64)
         best_c = np.empty(mt, dtype=np.int64)
@@ -523,13 +514,16 @@ def rollout_costs(
                 dk_ptr, dk_node, dk_cum, beta_cum, rel_node, a_pick, a_drop, a_step,
             )
             for c in range(n_c):
-                alive[:r0] = alive0[c]
+                g0 = 0
+                for r in range(r0):
+                    alive[r] = alive0[c, r]
+                    g0 += alive0[c, r]
                 alive[r0 : r0 + n_arr] = True
                 tpos[:] = pos1[c]
                 tfree[:] = tfree1[c]
-                out[c, s] = g0[c] + _simulate(
-                    base, horizon, alive, g0[c], tpos, tfree, n_arr, a_pick, a_drop, a_step,
-                    req_pick, req_drop, near, near_len, truncated, rel_list, dist, next_hop,
-                    act, lb, free, best_d, best_c, target, matched,
+                out[c, s] = g0 + _simulate(
+                    base, horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
+                    e_pick, e_drop, near, near_d, dist, next_hop,
+                    act, lb, seen, free, best_d, best_c, target, matched,
                 )
     return out
