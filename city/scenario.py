@@ -76,20 +76,40 @@ def load_city(name: str, data_dir: Path | str | None = None, *, use_cache: bool 
     return city
 
 
+def trip_files(data_dir: Path) -> list[Path]:
+    """A user's TLC High-Volume FHV parquet files, if any, under ``nyc/trips``."""
+    return sorted((data_dir / "nyc" / "trips").glob("fhvhv_tripdata_*.parquet"))
+
+
 def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 2022, seed: int = 0) -> Scenario:
-    """The city and its demand world: synthetic demand on either map, real weather and POIs when given."""
+    """The city and its demand world.
+
+    ``synthetic`` generates everything.  ``nyc`` reads the real map, LGA hourly
+    weather and points of interest from ``data_dir``; its demand is replayed
+    from TLC HV-FHV trip records when ``nyc/trips/fhvhv_tripdata_*.parquet``
+    files are there (with the permitted-events calendar), and synthesised on
+    top of the real map otherwise.
+    """
     data_dir = check_scenario(name, data_dir)
     city = load_city(name, data_dir)
-    from city.demand import synthetic_world
+    from city.demand import RecordedWorld, synthetic_world
 
     if name == "synthetic":
-        world = synthetic_world(city, year=year, seed=seed)
-    else:
-        from city.poi import read_poi_csv
-        from city.weather import read_weather_csv
+        return Scenario(name=name, city=city, world=synthetic_world(city, year=year, seed=seed), data_dir=data_dir)
+    from city.poi import read_poi_csv
+    from city.weather import read_weather_csv
 
-        assert data_dir is not None
-        weather = read_weather_csv(data_dir / "nyc" / "weather" / "airports_hourly_2022.csv", station="LGA", year=year)
-        pois = read_poi_csv(data_dir / "nyc" / "poi" / "nyc_points_of_interest.csv")
+    assert data_dir is not None
+    weather = read_weather_csv(data_dir / "nyc" / "weather" / "airports_hourly_2022.csv", station="LGA", year=year)
+    pois = read_poi_csv(data_dir / "nyc" / "poi" / "nyc_points_of_interest.csv")
+    trips = trip_files(data_dir)
+    if trips:
+        from city.events import read_permitted_events
+        from city.trips import read_fhvhv
+
+        calendar = data_dir / "nyc" / "events" / "nyc_permitted_events_2022.csv"
+        events = read_permitted_events(calendar, city) if calendar.exists() else []
+        world = RecordedWorld(city, read_fhvhv(trips, city), year=year, seed=seed, events=events, weather=weather, pois=pois)
+    else:
         world = synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois)
     return Scenario(name=name, city=city, world=world, data_dir=data_dir)
