@@ -9,14 +9,13 @@ sectors are drawn (pruning skips sectors without changing the rest).
 
 Conventions shared with :mod:`agents.rollout`:
 
-* Requests of a rollout have *codes*: ``0 … R0-1`` are the requests
-  outstanding at the decision minute, oldest first; ``R0 + a`` is the a-th
-  sampled arrival, in arrival order.  A smaller code is an older request, so
-  ``(distance, code)`` ordering reproduces the simulator's oldest-first
-  tie-breaks.
-* ``near[v, :near_len]`` lists the outstanding requests nearest to node ``v``
-  by ``(dist[v, pickup], code)``; when ``truncated`` it holds only the first
-  ``K`` of them and searches fall back to a scan of ``rel_list``.
+* Requests of a rollout have *codes*: ``0 … R-1`` are the outstanding
+  requests it tracks, oldest first; ``R + a`` is the a-th sampled arrival, in
+  arrival order.  A smaller code is an older request, so ``(distance, code)``
+  ordering reproduces the simulator's oldest-first tie-breaks.
+* ``near[v]``/``near_d[v]`` list the tracked requests nearest to node ``v``
+  (:func:`nearest_lists`); when all of them are gone a search scans every
+  tracked request.
 * A taxi is *free from step* ``tfree``: a taxi that picks up at step ``k``
   with trip length ``τ`` is free from step ``k + 1 + τ`` at its drop-off.  Busy
   taxis cannot act, so their intermediate positions are not tracked.
@@ -273,23 +272,19 @@ def _nearest(
                 if d < best_d:
                     best_d = d
                     best_c = r
+    row = dist[v]
     if lb >= 0:
-        row = dist[v]
         for a in range(seen, n_seen):
             if alive[r0 + a]:
-                d = np.int64(row[a_pick[a]])
-                if d < lb:
-                    lb = d
+                lb = min(lb, np.int64(row[a_pick[a]]))
         if lb >= best_d:
             return best_d, best_c, lb
     arr_d = _BIG
-    row = dist[v]
     for j in range(n_act):
         c = act[j]
         if alive[c]:
             d = np.int64(row[a_pick[c - r0]])
-            if d < arr_d:
-                arr_d = d
+            arr_d = min(arr_d, d)
             if d < best_d or (d == best_d and c < best_c):
                 best_d = d
                 best_c = c
@@ -328,8 +323,172 @@ def _oldest_at(
 
 
 @njit(cache=True)
-def _simulate(
-    base: int,
+def _walk(v: int, target: int, hops: int, next_hop: np.ndarray) -> int:
+    """The node ``hops`` hops from ``v`` along the shortest path to ``target``."""
+    for _ in range(hops):
+        v = next_hop[v, target]
+    return v
+
+
+@njit(cache=True)
+def _simulate_greedy(
+    horizon: int,
+    alive: np.ndarray,
+    n_alive: int,
+    tpos: np.ndarray,
+    tfree: np.ndarray,
+    n_arr: int,
+    a_pick: np.ndarray,
+    a_drop: np.ndarray,
+    a_step: np.ndarray,
+    e_pick: np.ndarray,
+    e_drop: np.ndarray,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    dist: np.ndarray,
+    next_hop: np.ndarray,
+    act: np.ndarray,
+    tgt: np.ndarray,
+    kanc: np.ndarray,
+    d0: np.ndarray,
+    need: np.ndarray,
+    plan_c: np.ndarray,
+    plan_d: np.ndarray,
+) -> int:
+    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``Σ g_k + g_H``.
+
+    A free taxi heading for its nearest request keeps it as the nearest while
+    it moves (the target gets exactly one hop closer, every other request at
+    most one, and an equally near request that was younger stays younger), so
+    the target changes only when it is picked up by another taxi or a strictly
+    nearer request arrives.  A taxi's plan is therefore stored as (anchor
+    node, anchor step, target, distance) and its position is walked only when
+    an event needs it: this is exactly :func:`agents.greedy.greedy_controls`
+    applied step by step, at a cost per event instead of per taxi and step.
+    ``tpos`` holds each taxi's node at its anchor (or drop-off when busy).
+    ``plan_c``/``plan_d`` are the step-1 plans of the taxis free at step 1
+    among the outstanding requests (the same in every sample; see
+    :func:`_first_plans`), so that only the arrivals are compared here.
+    """
+    r0 = e_pick.shape[0]
+    mt = tpos.shape[0]
+    n_act = 0
+    ai = 0
+    cost = 0
+    for i in range(mt):
+        need[i] = tfree[i] > 1
+        tgt[i] = plan_c[i] if tfree[i] <= 1 else -1
+        kanc[i] = 1
+        d0[i] = plan_d[i]
+    for k in range(1, horizon + 1):
+        first_new = ai
+        while ai < n_arr and a_step[ai] == k:
+            act[n_act] = r0 + ai
+            n_act += 1
+            n_alive += 1
+            ai += 1
+        # Plans for this step, from the state at its start.
+        for i in range(mt):
+            if tfree[i] > k:
+                continue
+            c = tgt[i]
+            if c < 0 and not need[i] and ai == first_new:
+                continue
+            if need[i] or c < 0:
+                v = tpos[i]
+                if c >= 0:
+                    p = e_pick[c] if c < r0 else a_pick[c - r0]
+                    v = _walk(v, p, min(k - kanc[i], d0[i]), next_hop)
+                d, c2, _ = _nearest(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
+                tpos[i] = v
+                kanc[i] = k
+                tgt[i] = c2
+                d0[i] = d
+                need[i] = False
+                continue
+            rem = kanc[i] + d0[i] - k
+            if rem <= 0:
+                continue
+            for a in range(first_new, ai):
+                p = a_pick[a]
+                if dist[tpos[i], p] >= d0[i]:
+                    continue
+                ct = tgt[i]
+                pt = e_pick[ct] if ct < r0 else a_pick[ct - r0]
+                v = _walk(tpos[i], pt, k - kanc[i], next_hop)
+                d = np.int64(dist[v, p])
+                tpos[i] = v
+                d0[i] = rem
+                kanc[i] = k
+                if d < rem:
+                    tgt[i] = r0 + a
+                    d0[i] = d
+                    rem = d
+        # Pickups, in agent order, by the taxis standing at their target.
+        for i in range(mt):
+            if tfree[i] > k or tgt[i] < 0 or kanc[i] + d0[i] != k:
+                continue
+            c = tgt[i]
+            v = e_pick[c] if c < r0 else a_pick[c - r0]
+            r = _oldest_at(v, alive, act, n_act, near, near_d, e_pick, a_pick)
+            if r < 0:
+                continue
+            alive[r] = False
+            n_alive -= 1
+            drop = e_drop[r] if r < r0 else a_drop[r - r0]
+            tpos[i] = drop
+            tfree[i] = k + 1 + max(1, np.int64(dist[v, drop]))
+            tgt[i] = -1
+            need[i] = True
+            for j in range(mt):
+                if tgt[j] == r:
+                    need[j] = True
+            if r >= r0:
+                for j in range(n_act):
+                    if act[j] == r:
+                        act[j] = act[n_act - 1]
+                        n_act -= 1
+                        break
+        cost += n_alive
+    return cost + n_alive
+
+
+@njit(cache=True, inline="always")
+def _heap_push(heap: np.ndarray, n: int, key: int) -> int:
+    """Push ``key`` onto the min-heap ``heap[:n]``; return the new size."""
+    j = n
+    heap[j] = key
+    while j > 0:
+        parent = (j - 1) >> 1
+        if heap[parent] <= heap[j]:
+            break
+        heap[parent], heap[j] = heap[j], heap[parent]
+        j = parent
+    return n + 1
+
+
+@njit(cache=True, inline="always")
+def _heap_pop(heap: np.ndarray, n: int) -> tuple[int, int]:
+    """Pop the smallest key of the min-heap ``heap[:n]``; return it and the new size."""
+    top = heap[0]
+    n -= 1
+    heap[0] = heap[n]
+    j = 0
+    while True:
+        a = 2 * j + 1
+        if a >= n:
+            break
+        if a + 1 < n and heap[a + 1] < heap[a]:
+            a += 1
+        if heap[j] <= heap[a]:
+            break
+        heap[j], heap[a] = heap[a], heap[j]
+        j = a
+    return top, n
+
+
+@njit(cache=True)
+def _simulate_ia(
     horizon: int,
     alive: np.ndarray,
     n_alive: int,
@@ -353,12 +512,16 @@ def _simulate(
     best_c: np.ndarray,
     target: np.ndarray,
     matched: np.ndarray,
+    heap: np.ndarray,
 ) -> int:
-    """Run the base policy for steps ``1 … horizon``; return ``Σ g_k + g_H`` over those steps.
+    """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``Σ g_k + g_H``.
 
-    ``lb[i]`` bounds taxi ``i``'s distance to the alive arrivals among the
-    first ``seen[i]`` from below (see :func:`_nearest`): it drops by one when
-    the taxi moves a hop and is unknown (-1) after a pickup.
+    Every step, :func:`agents.ia.ia_controls`: broadcast of local eligibility
+    commits the globally closest (distance, taxi, request) pair, retires both,
+    and repeats; each taxi's nearest free request is refreshed lazily.  ``lb[i]``
+    bounds taxi ``i``'s distance to the alive arrivals among the first
+    ``seen[i]`` from below (see :func:`_nearest`): it drops by one when the
+    taxi moves a hop and is unknown (-1) after a pickup.
     """
     r0 = e_pick.shape[0]
     mt = tpos.shape[0]
@@ -384,39 +547,37 @@ def _simulate(
                 i = free[f]
                 best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
                 seen[i] = ai
-            if base == GREEDY:
-                for f in range(nf):
-                    target[f] = best_c[f]
-            else:
-                # Broadcast of local eligibility: commit the globally closest (distance, taxi, request)
-                # pair, retire both, refresh the taxis that wanted that request, repeat.
-                n_m = 0
-                while True:
-                    sel = -1
+            # A binary heap of (distance, taxi) keys; a key whose request was taken
+            # meanwhile is refreshed when it surfaces (keys only ever grow).
+            n_h = 0
+            for f in range(nf):
+                if best_c[f] >= 0:
+                    n_h = _heap_push(heap, n_h, best_d[f] * mt + f)
+            n_m = 0
+            while n_h > 0:
+                key, n_h = _heap_pop(heap, n_h)
+                f = key % mt
+                c = best_c[f]
+                if not alive[c]:
+                    i = free[f]
+                    best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
+                    if best_c[f] >= 0:
+                        n_h = _heap_push(heap, n_h, best_d[f] * mt + f)
+                    continue
+                target[f] = c
+                alive[c] = False
+                matched[n_m] = c
+                n_m += 1
+            for j in range(n_m):
+                c = matched[j]
+                alive[c] = True
+                if c >= r0:
+                    # The arrival was hidden while bounds were refreshed: bring them back below it.
+                    p = a_pick[c - r0]
                     for f in range(nf):
-                        if target[f] < 0 and best_c[f] >= 0 and (sel < 0 or best_d[f] < best_d[sel]):
-                            sel = f
-                    if sel < 0:
-                        break
-                    c = best_c[sel]
-                    target[sel] = c
-                    alive[c] = False
-                    matched[n_m] = c
-                    n_m += 1
-                    for f in range(nf):
-                        if target[f] < 0 and best_c[f] == c:
-                            i = free[f]
-                            best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
-                for j in range(n_m):
-                    c = matched[j]
-                    alive[c] = True
-                    if c >= r0:
-                        # The arrival was hidden while bounds were refreshed: bring them back below it.
-                        p = a_pick[c - r0]
-                        for f in range(nf):
-                            i = free[f]
-                            if lb[i] >= 0:
-                                lb[i] = min(lb[i], np.int64(dist[tpos[i], p]))
+                        i = free[f]
+                        if lb[i] >= 0:
+                            lb[i] = min(lb[i], np.int64(dist[tpos[i], p]))
             for f in range(nf):
                 c = target[f]
                 if c < 0:
@@ -446,6 +607,109 @@ def _simulate(
                             break
         cost += n_alive
     return cost + n_alive
+
+
+@njit(cache=True)
+def _first_plans(
+    alive0: np.ndarray,
+    pos1: np.ndarray,
+    tfree1: np.ndarray,
+    e_pick: np.ndarray,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    dist: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per candidate, each taxi free at step 1: its nearest outstanding request and distance."""
+    n_c, mt = pos1.shape
+    plan_c = np.full((n_c, mt), -1, dtype=np.int64)
+    plan_d = np.full((n_c, mt), _BIG, dtype=np.int64)
+    no_act = np.empty(0, dtype=np.int32)
+    for c in range(n_c):
+        for i in range(mt):
+            if tfree1[c, i] <= 1:
+                plan_d[c, i], plan_c[c, i], _ = _nearest(pos1[c, i], -1, 0, 0, alive0[c], no_act, 0, near, near_d, e_pick, no_act, dist)
+    return plan_c, plan_d
+
+
+@njit(cache=True)
+def _run_samples(
+    lo: int,
+    hi: int,
+    out: np.ndarray,
+    plan_c: np.ndarray,
+    plan_d: np.ndarray,
+    base: int,
+    horizon: int,
+    key: np.uint64,
+    minute0: int,
+    mode: int,
+    alive0: np.ndarray,
+    pos1: np.ndarray,
+    tfree1: np.ndarray,
+    e_pick: np.ndarray,
+    e_drop: np.ndarray,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    rel_node: np.ndarray,
+    sectors: np.ndarray,
+    eta: np.ndarray,
+    pk_ptr: np.ndarray,
+    pk_node: np.ndarray,
+    pk_cum: np.ndarray,
+    dk_ptr: np.ndarray,
+    dk_node: np.ndarray,
+    dk_cum: np.ndarray,
+    beta_cum: np.ndarray,
+    max_arrivals: int,
+    dist: np.ndarray,
+    next_hop: np.ndarray,
+) -> None:
+    """Fill ``out[:, lo:hi]``: samples ``lo … hi-1`` of :func:`rollout_costs`, with scratch space of their own."""
+    n_c = alive0.shape[0]
+    r0 = e_pick.shape[0]
+    mt = pos1.shape[1]
+    cap = max(max_arrivals, 1)
+    a_pick = np.empty(cap, dtype=np.int32)
+    a_drop = np.empty(cap, dtype=np.int32)
+    a_step = np.empty(cap, dtype=np.int32)
+    alive = np.empty(r0 + cap, dtype=np.bool_)
+    act = np.empty(cap, dtype=np.int32)
+    tpos = np.empty(mt, dtype=np.int32)
+    tfree = np.empty(mt, dtype=np.int32)
+    lb = np.empty(mt, dtype=np.int64)
+    seen = np.zeros(mt, dtype=np.int64)
+    free = np.empty(mt, dtype=np.int32)
+    best_d = np.empty(mt, dtype=np.int64)
+    best_c = np.empty(mt, dtype=np.int64)
+    target = np.empty(mt, dtype=np.int64)
+    matched = np.empty(mt, dtype=np.int64)
+    need = np.empty(mt, dtype=np.bool_)
+    heap = np.empty(mt + 1, dtype=np.int64)
+    for s in range(lo, hi):
+        n_arr = sample_arrivals(
+            key, s, horizon, minute0, mode, sectors, eta, pk_ptr, pk_node, pk_cum,
+            dk_ptr, dk_node, dk_cum, beta_cum, rel_node, a_pick, a_drop, a_step,
+        )
+        for c in range(n_c):
+            g0 = 0
+            for r in range(r0):
+                alive[r] = alive0[c, r]
+                g0 += alive0[c, r]
+            alive[r0 : r0 + n_arr] = True
+            tpos[:] = pos1[c]
+            tfree[:] = tfree1[c]
+            if base == GREEDY:
+                out[c, s] = g0 + _simulate_greedy(
+                    horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
+                    e_pick, e_drop, near, near_d, dist, next_hop, act, target, seen, best_d, need,
+                    plan_c[c], plan_d[c],
+                )
+            else:
+                out[c, s] = g0 + _simulate_ia(
+                    horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
+                    e_pick, e_drop, near, near_d, dist, next_hop,
+                    act, lb, seen, free, best_d, best_c, target, matched, heap,
+                )
 
 
 @njit(cache=True, parallel=True)
@@ -487,43 +751,13 @@ def rollout_costs(
     ``n_chunks`` contiguous chunks with per-chunk scratch space; the result
     does not depend on the number of threads or chunks.
     """
-    n_c = alive0.shape[0]
-    r0 = e_pick.shape[0]
-    mt = pos1.shape[1]
-    out = np.empty((n_c, n_samples), dtype=np.int32)
+    out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)
+    plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist)
     n_chunks = max(1, min(n_samples, n_chunks))
-    cap = max(max_arrivals, 1)
     for chunk in prange(n_chunks):
-        a_pick = np.empty(cap, dtype=np.int32)
-        a_drop = np.empty(cap, dtype=np.int32)
-        a_step = np.empty(cap, dtype=np.int32)
-        alive = np.empty(r0 + cap, dtype=np.bool_)
-        act = np.empty(cap, dtype=np.int32)
-        tpos = np.empty(mt, dtype=np.int32)
-        tfree = np.empty(mt, dtype=np.int32)
-        lb = np.empty(mt, dtype=np.int64)
-        seen = np.zeros(mt, dtype=np.int64)
-        free = np.empty(mt, dtype=np.int32)
-        best_d = np.empty(mt, dtype=np.int64)
-        best_c = np.empty(mt, dtype=np.int64)
-        target = np.empty(mt, dtype=np.int64)
-        matched = np.empty(mt, dtype=np.int64)
-        for s in range(chunk * n_samples // n_chunks, (chunk + 1) * n_samples // n_chunks):
-            n_arr = sample_arrivals(
-                key, s, horizon, minute0, mode, sectors, eta, pk_ptr, pk_node, pk_cum,
-                dk_ptr, dk_node, dk_cum, beta_cum, rel_node, a_pick, a_drop, a_step,
-            )
-            for c in range(n_c):
-                g0 = 0
-                for r in range(r0):
-                    alive[r] = alive0[c, r]
-                    g0 += alive0[c, r]
-                alive[r0 : r0 + n_arr] = True
-                tpos[:] = pos1[c]
-                tfree[:] = tfree1[c]
-                out[c, s] = g0 + _simulate(
-                    base, horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
-                    e_pick, e_drop, near, near_d, dist, next_hop,
-                    act, lb, seen, free, best_d, best_c, target, matched,
-                )
+        _run_samples(
+            chunk * n_samples // n_chunks, (chunk + 1) * n_samples // n_chunks, out, plan_c, plan_d,
+            base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
+            sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals, dist, next_hop,
+        )
     return out

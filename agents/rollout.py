@@ -41,12 +41,16 @@ bit and the result does not depend on the number of threads.
 
 Speed: a compiled kernel (:mod:`agents._kernels`) runs the samples in
 parallel and shares each sample's requests across the candidate controls
-(common random numbers).  It tracks only what can change the decision:
-busy taxis are events (free again at a known step and node), each node's
-nearest outstanding requests are precomputed once per minute, and with
-``prune`` (a radius in hops) taxis and requests farther than that from the
-deciding agent are left out.  The default radius is validated by
-``tests/test_rollout.py`` to reproduce the unpruned decisions.
+(common random numbers).  It does only the work that can change a cost:
+busy taxis are events (free again at a known step and node); the greedy
+base policy is simulated event by event (a free taxi keeps its nearest
+request as it drives towards it, so only pickups and nearer arrivals
+re-plan it); the requests nearest to each node are listed once per
+decision; and with ``prune`` (a radius in hops, ``2 (H + 1)`` by default)
+taxis and requests farther than that from the deciding agent are left out.
+Every shortcut but pruning is exact (``tests/test_rollout.py`` compares the
+costs with the simulator); pruning is validated there to reproduce the
+unpruned decisions on seeded states.
 """
 
 from __future__ import annotations
@@ -71,8 +75,8 @@ from city.sim import PICKUP, Observation
 BASES = {"greedy": K.GREEDY, "ia": K.IA}
 SCOPES = ("local", "map")
 CE_MODES = {"limited": K.LIMITED_CE, "standard": K.STANDARD_CE}
-#: Nearest outstanding requests kept per node each minute; searches past them scan all requests.
-NEAR_K = 16
+#: Nearest tracked requests listed per node; searches past them scan all tracked requests.
+NEAR_K = 8
 
 
 @dataclass(frozen=True)
@@ -151,7 +155,7 @@ class DemandTables:
     beta_cum: np.ndarray
 
     @classmethod
-    def build(cls, city: City, forecast: Forecast, ce: str, seed: int) -> "DemandTables":
+    def build(cls, city: City, forecast: Forecast, ce: str, seed: int) -> DemandTables:
         """Tables of ``forecast``: the distributions themselves (limited CE) or per-sector pools (standard CE)."""
         S, n = city.n_sectors, city.n_nodes
         if forecast.n_sectors != S or forecast.rho.shape[0] != n:
@@ -216,12 +220,13 @@ class StepContext:
 
     Attributes
     ----------
+    city : City
+    config : RolloutConfig
     obs : Observation
     base_controls : ndarray (m,)
         The base policy's joint control for this minute (busy taxis: their next hop).
-    near : ndarray (n, NEAR_K)
-        Each node's nearest outstanding requests (see :func:`agents._kernels.nearest_lists`).
     tables : DemandTables
+        The forecast of the minute's hour.
     minute0 : int
         Minutes since the forecast hour began.
     """
@@ -230,16 +235,14 @@ class StepContext:
     config: RolloutConfig
     obs: Observation
     base_controls: np.ndarray
-    near: np.ndarray
     tables: DemandTables
     minute0: int
 
 
 def prepare_step(city: City, config: RolloutConfig, obs: Observation, tables: DemandTables, minute0: int) -> StepContext:
-    """The shared per-minute context: base controls and nearest-request lists."""
+    """The shared per-minute context: the base policy's joint control."""
     base = greedy_controls(city, obs) if config.base == "greedy" else ia_controls(city, obs)
-    near = K.nearest_lists(city.dist, np.ascontiguousarray(obs.req_pickup, dtype=np.int32), NEAR_K)
-    return StepContext(city, config, obs, base.astype(np.int32), near, tables, int(minute0))
+    return StepContext(city, config, obs, base.astype(np.int32), tables, int(minute0))
 
 
 def candidate_controls(city: City, obs: Observation, agent: int) -> np.ndarray:
@@ -282,16 +285,17 @@ def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np
     controls[:, agent] = cands
     req_pick = np.ascontiguousarray(obs.req_pickup, dtype=np.int32)
     req_drop = np.ascontiguousarray(obs.req_dropoff, dtype=np.int32)
-    alive0, pos1, tfree1 = K.step_zero(controls, obs.pos, obs.tau, obs.dest, req_pick, req_drop, ctx.near, city.dist)
+    alive0, pos1, tfree1 = K.step_zero(controls, obs.pos, obs.tau, obs.dest, req_pick, req_drop, city.dist)
 
     if cfg.prune is None:
         rel_node = np.ones(city.n_nodes, dtype=bool)
     else:
         rel_node = (city.dist[here] <= cfg.prune) | (city.dist[:, here] <= cfg.prune)
-    alive0 &= rel_node[req_pick][None, :]
+    tracked = np.flatnonzero(rel_node[req_pick])
     keep = (tfree1.min(axis=0) <= H) & rel_node[pos1].any(axis=0)
     keep[agent] = True
     taxis = np.flatnonzero(keep)
+    near, near_d = K.nearest_lists(city.dist, req_pick[tracked], NEAR_K)
 
     if cfg.scope == "local":
         sectors = city.local_sectors(int(city.node_sector[here]))
@@ -300,13 +304,14 @@ def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np
     if cfg.prune is not None:
         sectors = sectors[np.bincount(city.node_sector[rel_node], minlength=city.n_sectors)[sectors] > 0]
     tab = ctx.tables
-    max_arr = _max_arrivals(tab.eta[sectors], CE_MODES[cfg.ce], ctx.minute0, H)
+    mode = CE_MODES[cfg.ce]
     costs = K.rollout_costs(
-        BASES[cfg.base], H, cfg.samples, np.uint64(K.stream_key(cfg.seed, int(obs.t), agent)), ctx.minute0, CE_MODES[cfg.ce],
-        alive0, alive0.sum(axis=1).astype(np.int32), np.ascontiguousarray(pos1[:, taxis]), np.ascontiguousarray(tfree1[:, taxis]),
-        req_pick, req_drop, ctx.near, np.flatnonzero(rel_node[req_pick]).astype(np.int32), rel_node,
+        BASES[cfg.base], H, cfg.samples, np.uint64(K.stream_key(cfg.seed, int(obs.t), agent)), ctx.minute0, mode,
+        np.ascontiguousarray(alive0[:, tracked]), np.ascontiguousarray(pos1[:, taxis]), np.ascontiguousarray(tfree1[:, taxis]),
+        req_pick[tracked], req_drop[tracked], near, near_d, rel_node,
         sectors.astype(np.int64), tab.eta, tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum,
-        tab.beta_cum, max_arr, city.dist, city.next_hop, 8 * numba.get_num_threads(),
+        tab.beta_cum, _max_arrivals(tab.eta[sectors], mode, ctx.minute0, H), city.dist, city.next_hop,
+        8 * numba.get_num_threads(),
     )
     return cands, costs
 
@@ -417,7 +422,7 @@ class Surge(RolloutPolicy):
     """The paper's method: greedy base, limited CE, local sampling, event-informed forecast."""
 
     name = "surge"
-    defaults = {"forecast": "model", "horizon": 10, "samples": 1000, "base": "greedy", "scope": "local", "ce": "limited"}
+    defaults: ClassVar[dict[str, Any]] = {"forecast": "model", "horizon": 10, "samples": 1000, "base": "greedy", "scope": "local", "ce": "limited"}
 
 
 @register
@@ -425,4 +430,4 @@ class Garces2023(RolloutPolicy):
     """Garces et al. (2023): IA base, standard CE, whole-map sampling, previous-hour demand."""
 
     name = "garces2023"
-    defaults = {"forecast": "previous-hour", "horizon": 10, "samples": 1000, "base": "ia", "scope": "map", "ce": "standard"}
+    defaults: ClassVar[dict[str, Any]] = {"forecast": "previous-hour", "horizon": 10, "samples": 1000, "base": "ia", "scope": "map", "ce": "standard"}

@@ -43,6 +43,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--json", default=None)
     s.set_defaults(func=bench_sim)
 
+    pl = bsub.add_parser("plan", help="rollout planning time per step from mid-episode states, one fresh process per policy")
+    pl.add_argument("--scenario", default="synthetic", help="synthetic (embedded) or nyc (needs --data)")
+    pl.add_argument("--data", default=None, help="data directory laid out like shared/data (for --scenario nyc)")
+    pl.add_argument("--date", default="2022-11-17")
+    pl.add_argument("--hour", type=int, default=19, help="episode hour (default: the 7 pm surge)")
+    pl.add_argument("--taxis", type=int, default=100)
+    pl.add_argument("--horizon", type=int, default=10)
+    pl.add_argument("--samples", type=int, default=1000)
+    pl.add_argument("--steps", type=int, default=5, help="consecutive planning steps timed")
+    pl.add_argument("--warmup", type=int, default=25, help="minutes of greedy play before timing (a mid-episode state)")
+    pl.add_argument("--seed", type=int, default=0, help="seed of the fleet's initial placement")
+    pl.add_argument("--policies", nargs="+", default=["surge", "garces2023"])
+    pl.add_argument("--forecast", default=None, help="forecast provider for surge (garces2023 keeps previous-hour)")
+    pl.add_argument("--model", default=None, help="trained predictor directory for surge's --forecast model")
+    pl.add_argument("--threads", type=int, default=None, help="compiled-kernel threads (default: all cores)")
+    pl.add_argument("--json", default=None)
+    pl.set_defaults(func=bench_plan)
+
 
 def bench_city(args: argparse.Namespace) -> int:
     from city.scenario import check_scenario
@@ -115,6 +133,101 @@ def bench_sim(args: argparse.Namespace) -> int:
     }
     print(f"{args.scenario}: {args.taxis} taxis, {len(requests)} requests at {args.hour}:00 — "
           f"{statistics.median(total):.0f} steps/s (greedy {out['policy_ms_per_step']:.2f} ms + transition {out['transition_ms_per_step']:.2f} ms per step)")
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1))
+    return 0
+
+
+def _plan_child(args: argparse.Namespace, name: str) -> dict:
+    """Time ``name``'s planning in this (fresh) process; see :func:`bench_plan`."""
+    import numba
+
+    from agents.base import EpisodeContext, make_policy
+    from agents.greedy import greedy_controls
+    from city.scenario import load_scenario
+    from city.sim import FleetSim
+    from coordinator.evaluate import episode_requests, initial_positions
+
+    if args.threads:
+        numba.set_num_threads(args.threads)
+    scen = load_scenario(args.scenario, args.data)
+    date = dt.date.fromisoformat(args.date)
+    minutes = args.warmup + args.steps + 1
+    requests = episode_requests(scen.world, date, args.hour, minutes)
+    sim = FleetSim(scen.city, requests, initial_positions(scen.city, args.taxis, args.seed))
+    for _ in range(args.warmup):
+        sim.step(greedy_controls(scen.city, sim.observe()))
+    options: dict = {"horizon": args.horizon, "samples": args.samples}
+    if name == "surge":
+        options.update({k: v for k, v in (("forecast", args.forecast), ("model", args.model)) if v is not None})
+    policy = make_policy(name, scen.city, **options)
+    policy.reset(EpisodeContext(scen.city, date, args.hour, minutes, args.seed, scen.world))
+    # One untimed call loads the compiled kernels from numba's cache (or compiles them).
+    t0 = time.perf_counter()
+    policy.act(sim.observe())
+    first = time.perf_counter() - t0
+    times, free, outstanding = [], [], []
+    for _ in range(args.steps):
+        obs = sim.observe()
+        t0 = time.perf_counter()
+        u = policy.act(obs)
+        times.append(time.perf_counter() - t0)
+        free.append(int((obs.tau == 0).sum()))
+        outstanding.append(int(obs.req_index.size))
+        sim.step(u)
+    return {
+        "plan_seconds_per_step": _stats(times),
+        "plan_seconds": times,
+        "free_taxis": free,
+        "outstanding_requests": outstanding,
+        "first_call_seconds": first,
+        "threads": numba.get_num_threads(),
+        "peak_rss_mb": peak_rss_mb(),
+        "city": scen.city.summary(),
+    }
+
+
+def bench_plan(args: argparse.Namespace) -> int:
+    """Planning seconds per step of each rollout policy, each in a fresh ``spawn`` process.
+
+    The fleet plays greedy for ``--warmup`` minutes from a seeded placement at
+    ``--date --hour`` to reach a mid-episode state; then the policy plans
+    ``--steps`` consecutive steps, which are applied.  Peak RSS is that of the
+    planning process (scenario loading included).
+    """
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    from agents.base import policy_names
+    from city.errors import ConfigError
+    from city.scenario import check_scenario
+
+    check_scenario(args.scenario, args.data)
+    unknown = [p for p in args.policies if p not in policy_names()]
+    if unknown:
+        raise ConfigError(f"unknown policy {unknown[0]!r}; choose from {', '.join(policy_names())}")
+    out: dict = {
+        "schema": "surge.bench.plan/1",
+        "cpus": os.cpu_count(),
+        "config": {k: getattr(args, k) for k in ("scenario", "date", "hour", "taxis", "horizon", "samples", "steps", "warmup", "seed", "forecast")},
+        "policies": {},
+    }
+    for name in args.policies:
+        with ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn")) as pool:
+            res = pool.submit(_plan_child, args, name).result()
+        out["city"] = res.pop("city")
+        out["policies"][name] = res
+        st = res["plan_seconds_per_step"]
+        print(f"{name:<11} {st['median']:8.3f} s/step median (min {st['min']:.3f}, max {st['max']:.3f})  "
+              f"free taxis {res['free_taxis']}  peak RSS {res['peak_rss_mb']:.0f} MB  first call {res['first_call_seconds']:.2f} s", flush=True)
+    pol = out["policies"]
+    if "surge" in pol and "garces2023" in pol:
+        ratio = pol["garces2023"]["plan_seconds_per_step"]["median"] / pol["surge"]["plan_seconds_per_step"]["median"]
+        out["garces2023_over_surge"] = ratio
+        print(f"garces2023 / surge median time ratio: {ratio:.2f}")
+    c = out["city"]
+    print(f"{args.scenario}: {c['intersections']} intersections, {args.taxis} taxis, H={args.horizon}, {args.samples} samples, "
+          f"{args.date} {args.hour}:00 + {args.warmup} min, {os.cpu_count()} cpus")
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
     return 0

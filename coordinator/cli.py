@@ -60,8 +60,9 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--taxis", type=_positive, default=100)
     p.add_argument("--minutes", type=_positive, default=60, help="episode length N in minutes")
     p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"])
-    p.add_argument("--forecast", default=None, help="forecast provider for rollout policies (true-rate, previous-hour, model)")
-    p.add_argument("--model", default=None, help="trained predictor directory for --forecast model")
+    p.add_argument("--forecast", default=None,
+                   help="forecast provider for surge (true-rate, previous-hour, model); garces2023 keeps previous-hour")
+    p.add_argument("--model", default=None, help="trained predictor directory for surge's --forecast model")
     p.add_argument("--horizon", type=_positive, default=None, help="rollout horizon H")
     p.add_argument("--samples", type=_positive, default=None, help="rollout Monte-Carlo samples")
     p.add_argument("--world-seed", type=int, default=0, help="seed of the synthetic demand world")
@@ -71,12 +72,21 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
 
 
 def rollout_options(args: argparse.Namespace, names: list[str]) -> dict[str, dict]:
-    """Per-policy options from the rollout flags, for the policies that take them."""
-    opts = {k: v for k, v in (("forecast", args.forecast), ("model", args.model), ("horizon", args.horizon), ("samples", args.samples)) if v is not None}
-    if not opts:
-        return {}
-    rollout = [n for n in names if n in ("surge", "garces2023")]
-    return {n: dict(opts) for n in rollout}
+    """Per-policy options from the rollout flags, for the policies that take them.
+
+    ``--horizon`` and ``--samples`` go to both rollout policies; ``--forecast``
+    and ``--model`` only to ``surge``, so that ``garces2023`` keeps its
+    previous-hour demand (the baseline as the paper ran it).
+    """
+    shared = {k: v for k, v in (("horizon", args.horizon), ("samples", args.samples)) if v is not None}
+    own = {k: v for k, v in (("forecast", args.forecast), ("model", args.model)) if v is not None}
+    out = {}
+    for n in names:
+        if n == "surge" and (shared or own):
+            out[n] = {**shared, **own}
+        elif n == "garces2023" and shared:
+            out[n] = dict(shared)
+    return out
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
