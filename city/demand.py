@@ -50,19 +50,22 @@ if TYPE_CHECKING:
 #: The paper's evaluation date: a Thursday with Broadway and arena events and an event surge at 7 pm.
 EVAL_DATE = dt.date(2022, 11, 17)
 
-#: Citywide requests per hour at the reference point: a weekday at 19:00, dry weather, month factor 1.
-#: Chosen so that 100 taxis on the ≈2,200-node synthetic map are stressed but not swamped.
-REF_RATE = 420.0
+#: Citywide base requests per hour (no events) at the reference point: a weekday at 19:00, dry
+#: weather, month factor 1.  Event surges come on top: on a typical weekday they lift the citywide
+#: total to ≈ 250 / 350 / 440 / 330 requests at 15 / 17 / 19 / 21 h, so that 100 taxis on the
+#: ≈2,200-node synthetic map are stressed but not swamped.
+REF_RATE = 290.0
 
-# Base profile of the citywide demand by hour, relative to a weekday 19:00 (15h : 17h : 19h : 21h ≈ 250 : 350 : 420 : 320).
+# Base profile of the citywide demand by hour, relative to a weekday 19:00.  The evening is flat:
+# its peak comes from the events (concerts, talks, games, shows) that start and end then.
 # fmt: off
 PROFILES: dict[str, np.ndarray] = {
-    "weekday":  np.array([.30, .20, .14, .11, .11, .16, .32, .52, .64, .60, .54, .56,
-                          .60, .60, .62, .60, .72, .84, .95, 1.0, .90, .77, .68, .50]),
-    "saturday": np.array([.55, .45, .35, .25, .18, .12, .14, .20, .28, .38, .50, .60,
-                          .66, .68, .68, .68, .70, .78, .88, .95, .92, .88, .85, .75]),
-    "sunday":   np.array([.62, .50, .40, .28, .18, .12, .12, .16, .22, .32, .44, .55,
-                          .60, .62, .62, .62, .62, .64, .66, .64, .58, .50, .42, .32]),
+    "weekday":  np.array([.43, .29, .20, .16, .16, .23, .46, .75, .93, .87, .78, .81,
+                          .87, .87, .90, .87, .88, .78, .98, .86, 1.04, .98, .80, .60]),
+    "saturday": np.array([.80, .65, .51, .36, .26, .17, .20, .29, .41, .55, .72, .87,
+                          .96, .99, .99, .99, .92, .96, 1.08, 1.05, 1.13, 1.08, .98, .87]),
+    "sunday":   np.array([.90, .72, .58, .41, .26, .17, .17, .23, .32, .46, .64, .80,
+                          .87, .90, .90, .90, .81, .79, .81, .74, .71, .62, .49, .37]),
 }
 #: Friday nights run later than other weeknights (multiplier on the weekday profile).
 FRIDAY_NIGHT = np.array([1.0] * 17 + [1.04, 1.07, 1.10, 1.15, 1.22, 1.32, 1.40])
@@ -74,18 +77,20 @@ DAY_FACTOR = (0.95, 0.98, 1.0, 1.0, 1.03, 1.0, 1.0)
 MONTH_FACTOR = (0.88, 0.90, 0.96, 0.98, 1.0, 0.99, 0.94, 0.92, 0.99, 1.02, 1.0, 1.03)
 
 #: Taxi trips of the simulated fleet per attendee, arriving and departing, by category.
+#: Sized so that a mid-size event (about 1,000 people) doubles or triples its sector's evening demand.
 TAXI_SHARE: dict[str, tuple[float, float]] = {
-    "conferences": (0.010, 0.012),
-    "expos": (0.008, 0.009),
-    "concerts": (0.007, 0.008),
+    "conferences": (0.020, 0.024),
+    "expos": (0.006, 0.008),
+    "concerts": (0.020, 0.022),
     "festivals": (0.002, 0.0025),
     "performing-arts": (0.0030, 0.0040),
-    "community": (0.002, 0.002),
-    "sports": (0.0055, 0.008),
+    "community": (0.020, 0.020),
+    "sports": (0.0050, 0.0065),
 }
 #: Share of arrival pickups in the venue's own sector (the rest in adjacent sectors); departures likewise.
-ARRIVAL_HOME_SHARE = 0.5
-DEPARTURE_HOME_SHARE = 0.7
+#: Most arrivals are picked up at the venue's block (drop-offs nearby, short hops from around the corner).
+ARRIVAL_HOME_SHARE = 0.9
+DEPARTURE_HOME_SHARE = 0.9
 #: Events longer than this (minutes) spread part of their arrivals and departures over their duration.
 LONG_EVENT_MIN = 300
 #: Target mean trip length of the gravity OD matrix, in hops.
@@ -742,8 +747,9 @@ def _base_rate(city: City, year: int, weather: HourlyWeather, intensity: np.ndar
 def _surge_split(city: City, intensity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``[venue sector, pickup sector]`` shares of arrival and departure pickups.
 
-    Arrivals are picked up mostly in the sectors around the venue (dinner,
-    hotels, offices nearby); departures mostly in the venue's own sector.
+    Arrivals and departures are picked up mostly in the venue's own sector
+    (:data:`ARRIVAL_HOME_SHARE`, :data:`DEPARTURE_HOME_SHARE`), the rest in
+    the adjacent sectors in proportion to their base demand.
     """
     S = city.n_sectors
     out = []
@@ -794,11 +800,14 @@ VENUE_PLAN: tuple[tuple[str, int, int, int], ...] = (
     ("convention center", 1, 20000, 20000),
     ("festival grounds", 1, 40000, 40000),
     ("park", 3, 5000, 15000),
-    ("concert hall", 30, 300, 3000),
+    ("concert hall", 45, 300, 3000),
     ("stage", 10, 150, 800),
-    ("conference center", 15, 300, 2500),
-    ("community center", 199, 50, 600),
+    ("conference center", 30, 300, 2500),
+    ("community center", 169, 50, 600),
 )
+#: Venue kinds spread over the whole map (every sector with pickups gets at least one of each kind
+#: while there are enough), so that event surges are not confined to midtown.
+_SPREAD_KINDS = ("concert hall", "conference center")
 _SURNAMES = (
     "Gershwin", "Majestic", "Imperial", "Shubert", "Booth", "Barrymore", "Belasco", "Ambassador", "Lyceum", "Hudson",
     "Palace", "Lunt", "Winter", "Minskoff", "Richard", "August", "Walter", "Eugene", "Neil", "Samuel", "Helen",
@@ -811,7 +820,8 @@ _COMMUNITY_KINDS = ("Community Center", "Library", "Church Hall", "Gallery", "Re
 
 def _venues(city: City, anchors: dict[str, int], busy: np.ndarray, rng: np.random.Generator) -> list[Venue]:
     """About 300 venues: theatres around the theatre anchor, the arena, convention centre and park at
-    their anchors, everything else spread over sectors in proportion to their busyness."""
+    their anchors, concert halls and conference centres in every sector (more in busy ones),
+    everything else spread over sectors in proportion to their busyness."""
     S = city.n_sectors
     has_nodes = np.bincount(city.node_sector[city.pickup], minlength=S) > 0
     p_busy = np.where(has_nodes, busy, 0.0)
@@ -824,6 +834,11 @@ def _venues(city: City, anchors: dict[str, int], busy: np.ndarray, rng: np.rando
         elif kind in ("arena", "convention center", "festival grounds"):
             key = {"arena": "arena", "convention center": "expo", "festival grounds": "park"}[kind]
             sectors = np.full(count, anchors[key])
+        elif kind in _SPREAD_KINDS:
+            p_spread = np.where(has_nodes, np.sqrt(busy), 0.0)
+            p_spread = p_spread / p_spread.sum()
+            cover = rng.choice(S, size=min(count, int(has_nodes.sum())), replace=False, p=p_spread)
+            sectors = np.concatenate([cover, rng.choice(S, size=count - len(cover), p=p_spread)]).astype(np.int64)
         else:
             sectors = rng.choice(S, size=count, p=p_busy)
         nodes = _random_nodes(city, sectors, rng)
@@ -1073,15 +1088,28 @@ def _festivals(venues: list[Venue], grounds: list[int], days: list[dt.date], rng
 
 
 def _small_events(venues: list[Venue], by_kind: dict[str, list[int]], days: list[dt.date], year: int, rng: np.random.Generator) -> list[_Spec]:
-    """Club concerts, small-stage shows, hotel conferences and community events."""
+    """Club concerts, small-stage shows, hotel conferences and talks, and community events.
+
+    These are the irregular events that drive the evening surges: a concert
+    hall holds a show on about one day in five and a conference centre an
+    event on about two weekdays in five, on days drawn at random, with
+    popularity (hence attendance and taxi trips) varying widely from one
+    event to the next.  Evening concerts start 19:30–21:00 (arrivals in the
+    19 h hour); weekend shows start at 15:00–15:30 (ending around 17:00) or
+    18:00; day conferences close at 17:00–17:30 and evening talks and
+    receptions start at 18:00–18:30 (arrivals at 17 h, departures around 19 h).
+    """
     specs: list[_Spec] = []
     n = len(days)
     name_rng = random.Random(int(rng.integers(1 << 30)))
     weekdays = [i for i, d in enumerate(days) if d.weekday() < 5]
+    weekend = np.array([0.05, 0.05, 0.05, 0.05, 0.1, 1.0, 1.0])
     plan = (
-        ("concert hall", "concerts", 50, _CLUB_WEIGHT, (19.5, 20.0, 21.0), (150, 181), (2, 2.5)),
+        ("concert hall", "concerts", 60, _CLUB_WEIGHT, (19.5, 20.0, 20.0, 20.5, 21.0), (120, 181), (2, 2.5)),
+        ("concert hall", "concerts", 16, weekend, (15.0, 15.5, 18.0, 18.0), (100, 131), (2, 2.5)),
         ("stage", "performing-arts", 60, _CLUB_WEIGHT, (19.0, 19.5, 21.5), (90, 121), (2, 3)),
-        ("conference center", "conferences", 20, None, (8.5, 8.5, 8.5, 18.0), (180, 481), (2, 3)),
+        ("conference center", "conferences", 24, None, (8.5,), (510, 541), (2, 3)),
+        ("conference center", "conferences", 75, None, (18.0, 18.0, 18.5), (60, 101), (2, 2.5)),
         ("community center", "community", 4, np.array([1.0, 1.0, 1.0, 1.0, 0.8, 1.2, 1.0]), (18.0, 18.5, 10.0), (90, 181), (1.3, 4)),
         ("park", "community", 3, np.array([0.5, 0.5, 0.5, 0.5, 0.5, 1.5, 1.5]), (10.0, 11.0), (120, 241), (1.5, 3)),
     )
@@ -1097,8 +1125,6 @@ def _small_events(venues: list[Venue], by_kind: dict[str, list[int]], days: list
                 day = days[d]
                 hour = float(rng.choice(hours))
                 minutes = int(rng.integers(mlo, mhi))
-                if category == "conferences" and hour < 12:
-                    minutes = max(minutes, 420)  # day conferences: 8:30 to the afternoon
                 if category == "concerts":
                     name = texts.concert_name(name_rng)
                 elif category == "performing-arts":
