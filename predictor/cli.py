@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
-import sys
 import time
 from pathlib import Path
 
@@ -169,22 +167,3 @@ def eval_main(args) -> int:
         plot(result, args.plot, title=f"Demand prediction PE, {sc['name']} test months Sep-Dec {data.year}")
         print(f"wrote {args.plot}")
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Stand-alone entry (``python -m predictor.cli train ...``) for when the main CLI is absent."""
-    from city.errors import SurgeError
-
-    parser = argparse.ArgumentParser(prog="surge")
-    sub = parser.add_subparsers(dest="command", required=True)
-    add_parser(sub)
-    args = parser.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except SurgeError as exc:
-        print(f"surge: error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())
