@@ -201,19 +201,19 @@ def _demand_plot(rows: list[dict], args: argparse.Namespace) -> None:
 
 # ------------------------------------------------------------------------- demo
 def add_demo(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="a small run on the embedded synthetic city")
-    p.add_argument("--taxis", type=_positive, default=30)
-    p.add_argument("--minutes", type=_positive, default=30)
+    p = sub.add_parser("demo", help="the 7 pm surge hour on the embedded synthetic city, baselines against surge (true-rate forecast)")
+    p.add_argument("--taxis", type=_positive, default=100)
+    p.add_argument("--minutes", type=_positive, default=60)
     p.add_argument("--seeds", type=_positive, default=2)
-    p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"])
+    p.add_argument("--policies", nargs="+", default=["greedy", "ia", "surge", "oracle"])
     p.set_defaults(func=cmd_demo)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
     ns = argparse.Namespace(
         scenario="synthetic", data=None, date="2022-11-17", hours=[19], seeds=args.seeds, taxis=args.taxis,
-        minutes=args.minutes, policies=args.policies, forecast=None, model=None, horizon=None, samples=None,
-        world_seed=0, jobs=1, json=None,
+        minutes=args.minutes, policies=args.policies, forecast="true-rate", model=None, horizon=None, samples=None,
+        world_seed=0, jobs=2, json=None,
     )
     return cmd_evaluate(ns)
 

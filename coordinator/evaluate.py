@@ -143,6 +143,10 @@ def evaluate(cfg: EvalConfig, progress: Callable[[str], None] | None = None) -> 
 
     if cfg.jobs > 1:
         import multiprocessing as mp
+        import os
+
+        # Workers share the cores: each gets its slice for the compiled rollout kernels.
+        os.environ.setdefault("NUMBA_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // cfg.jobs)))
 
         with ProcessPoolExecutor(max_workers=cfg.jobs, mp_context=mp.get_context("spawn")) as pool:
             futures = [pool.submit(_instance, cfg, h, s) for h, s in tasks]
