@@ -34,6 +34,21 @@ def line_city(n: int = 5, two_way: bool = True, sectors: int = 1) -> City:
     return City.build("line", xy, np.array(u), np.array(v), lengths, node_sector, [f"s{k}" for k in range(sectors)])
 
 
+def grid_edges(side: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Coordinates (100 m spacing) and two-way edges of a ``side × side`` street grid."""
+    xy = np.array([(i % side, i // side) for i in range(side * side)], dtype=float) * 100.0
+    u, v = [], []
+    for i in range(side * side):
+        x, y = i % side, i // side
+        if x + 1 < side:
+            u += [i, i + 1]
+            v += [i + 1, i]
+        if y + 1 < side:
+            u += [i, i + side]
+            v += [i + side, i]
+    return xy, np.array(u), np.array(v)
+
+
 @pytest.fixture
 def line5() -> City:
     return line_city(5)

@@ -24,28 +24,20 @@ from city.graph import City
 from city.occupancy import LOCALE_TYPES
 from city.poi import Pois
 from city.weather import HourlyWeather, hours_in_year
+from tests.conftest import grid_edges
 
 EVE_19 = dt.datetime.combine(EVAL_DATE, dt.time(19))
 
 
 def grid_city(side: int = 8, names: tuple[str, ...] = ("Times Sq/Theatre District", "Penn Station/Madison Sq West", "Clinton West", "Battery Park")) -> City:
     """A two-way ``side × side`` grid in four quadrant sectors; the last node of each sector cannot pick up."""
-    xy = np.array([(i % side, i // side) for i in range(side * side)], dtype=float) * 100.0
-    u, v = [], []
-    for i in range(side * side):
-        x, y = i % side, i // side
-        if x + 1 < side:
-            u += [i, i + 1]
-            v += [i + 1, i]
-        if y + 1 < side:
-            u += [i, i + side]
-            v += [i + side, i]
+    xy, u, v = grid_edges(side)
     half = side // 2 * 100.0
     sector = (xy[:, 0] >= half).astype(int) + 2 * (xy[:, 1] >= half).astype(int)
     pickup = np.ones(side * side, dtype=bool)
     for s in range(4):
         pickup[np.flatnonzero(sector == s)[-1]] = False
-    return City.build("grid", xy, np.array(u), np.array(v), np.full(len(u), 100.0), sector, list(names), pickup=pickup)
+    return City.build("grid", xy, u, v, np.full(len(u), 100.0), sector, list(names), pickup=pickup)
 
 
 @pytest.fixture(scope="module")

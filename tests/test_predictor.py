@@ -14,6 +14,7 @@ from city.events import Event
 from city.graph import City
 from city.sim import Requests
 from city.weather import HourlyWeather, hours_in_year
+from tests.conftest import grid_edges
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -25,18 +26,9 @@ class TinyWorld:
     def __init__(self, year: int = 2022, seed: int = 0) -> None:
         rng = np.random.default_rng(seed)
         side = 4
-        xy = np.array([(i % side, i // side) for i in range(side * side)], dtype=float) * 100
-        u, v = [], []
-        for i in range(side * side):
-            x, y = i % side, i // side
-            if x + 1 < side:
-                u += [i, i + 1]
-                v += [i + 1, i]
-            if y + 1 < side:
-                u += [i, i + side]
-                v += [i + side, i]
+        xy, u, v = grid_edges(side)
         node_sector = (xy[:, 0] >= 200).astype(int)
-        self.city = City.build("tiny", xy, np.array(u), np.array(v), np.full(len(u), 100.0), node_sector, ["west", "east"])
+        self.city = City.build("tiny", xy, u, v, np.full(len(u), 100.0), node_sector, ["west", "east"])
         self.year, self.seed = year, seed
         H = hours_in_year(year)
         hrs = np.arange(H) % 24
