@@ -83,21 +83,6 @@ class City:
     def neighbors(self, node: int) -> np.ndarray:
         return self.indices[self.indptr[node] : self.indptr[node + 1]]
 
-    def padded_neighbors(self) -> np.ndarray:
-        """Out-neighbours as an ``(n, max_degree)`` array padded with -1, for vectorised code."""
-        deg = np.diff(self.indptr)
-        out = np.full((self.n_nodes, int(deg.max())), -1, dtype=np.int32)
-        rows = np.repeat(np.arange(self.n_nodes), deg)
-        cols = np.arange(self.n_edges) - np.repeat(self.indptr[:-1], deg)
-        out[rows, cols] = self.indices
-        return out
-
-    def sector_nodes(self, sector: int, pickup_only: bool = True) -> np.ndarray:
-        mask = self.node_sector == sector
-        if pickup_only:
-            mask &= self.pickup
-        return np.flatnonzero(mask)
-
     def local_sectors(self, sector: int) -> np.ndarray:
         """``A(s) ∪ {s}``, the sectors whose demand an agent in ``sector`` samples."""
         mask = self.sector_adj[sector].copy()

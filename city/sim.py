@@ -58,9 +58,6 @@ class FleetState:
     dest: np.ndarray
     picked_at: np.ndarray
 
-    def copy(self) -> "FleetState":
-        return FleetState(self.t, self.pos.copy(), self.tau.copy(), self.dest.copy(), self.picked_at.copy())
-
     @property
     def free(self) -> np.ndarray:
         return self.tau == 0

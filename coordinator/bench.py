@@ -146,6 +146,7 @@ def _plan_child(args: argparse.Namespace, name: str) -> dict:
     from agents.greedy import greedy_controls
     from city.scenario import load_scenario
     from city.sim import FleetSim
+    from coordinator.cli import rollout_options
     from coordinator.evaluate import episode_requests, initial_positions
 
     if args.threads:
@@ -157,10 +158,7 @@ def _plan_child(args: argparse.Namespace, name: str) -> dict:
     sim = FleetSim(scen.city, requests, initial_positions(scen.city, args.taxis, args.seed))
     for _ in range(args.warmup):
         sim.step(greedy_controls(scen.city, sim.observe()))
-    options: dict = {"horizon": args.horizon, "samples": args.samples}
-    if name == "surge":
-        options.update({k: v for k, v in (("forecast", args.forecast), ("model", args.model)) if v is not None})
-    policy = make_policy(name, scen.city, **options)
+    policy = make_policy(name, scen.city, **rollout_options(args, [name]).get(name, {}))
     policy.reset(EpisodeContext(scen.city, date, args.hour, minutes, args.seed, scen.world))
     # One untimed call loads the compiled kernels from numba's cache (or compiles them).
     t0 = time.perf_counter()

@@ -13,7 +13,7 @@ import json
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -68,7 +68,7 @@ def run_episode(
     """Run one policy for ``context.minutes`` steps and collect its metrics and controls."""
     sim = FleetSim(city, requests, start)
     if policy.clairvoyant:
-        context = EpisodeContext(**{**context.__dict__, "future": requests})
+        context = replace(context, future=requests)
     policy.reset(context)
     costs: list[int] = []
     plan: list[float] = []
