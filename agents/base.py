@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+import inspect
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -85,7 +86,12 @@ def make_policy(name: str, city: City, **options: Any) -> Policy:
         importlib.import_module(_LAZY[name])
     if name not in POLICIES:
         raise ConfigError(f"unknown policy {name!r}; choose from {', '.join(policy_names())}")
-    return POLICIES[name](city, **options)
+    cls = POLICIES[name]
+    try:
+        inspect.signature(cls).bind(city, **options)
+    except TypeError as exc:
+        raise ConfigError(f"policy {name!r}: {exc}") from exc
+    return cls(city, **options)
 
 
 def busy_next_hops(city: City, obs: Observation) -> np.ndarray:

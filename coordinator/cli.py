@@ -59,7 +59,8 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=_positive, default=25, help="initial states 0..N-1")
     p.add_argument("--taxis", type=_positive, default=100)
     p.add_argument("--minutes", type=_positive, default=60, help="episode length N in minutes")
-    p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"])
+    p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"],
+                   help="registry names, each optionally with options: surge:forecast=true-rate,samples=500")
     p.add_argument("--forecast", default=None,
                    help="forecast provider for surge (true-rate, previous-hour, model); garces2023 keeps previous-hour")
     p.add_argument("--model", default=None, help="trained predictor directory for surge's --forecast model")
@@ -67,7 +68,8 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--samples", type=_positive, default=None, help="rollout Monte-Carlo samples")
     p.add_argument("--world-seed", type=int, default=0, help="seed of the synthetic demand world")
     p.add_argument("--jobs", type=_positive, default=1, help="worker processes")
-    p.add_argument("--json", default=None, help="write surge.results/1 JSON here")
+    p.add_argument("--json", default=None, help="write surge.results/1 JSON here, updated after every instance")
+    p.add_argument("--resume", action="store_true", help="keep the instances already in --json and run only the rest")
     p.set_defaults(func=cmd_evaluate)
 
 
@@ -80,24 +82,29 @@ def rollout_options(args: argparse.Namespace, names: list[str]) -> dict[str, dic
     """
     shared = {k: v for k, v in (("horizon", args.horizon), ("samples", args.samples)) if v is not None}
     own = {k: v for k, v in (("forecast", args.forecast), ("model", args.model)) if v is not None}
+    from coordinator.evaluate import parse_policy
+
     out = {}
-    for n in names:
-        if n == "surge" and (shared or own):
-            out[n] = {**shared, **own}
-        elif n == "garces2023" and shared:
-            out[n] = dict(shared)
+    for label in names:
+        name = parse_policy(label)[0]
+        if name == "surge" and (shared or own):
+            out[label] = {**shared, **own}
+        elif name == "garces2023" and shared:
+            out[label] = dict(shared)
     return out
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from agents.base import policy_names
     from city.scenario import check_scenario
-    from coordinator.evaluate import EvalConfig, evaluate, format_table, summarize, write_json
+    from coordinator.evaluate import EvalConfig, evaluate, format_table, parse_policy, summarize
 
     check_scenario(args.scenario, args.data)
-    unknown = [p for p in args.policies if p not in policy_names()]
+    unknown = [p for p in args.policies if parse_policy(p)[0] not in policy_names()]
     if unknown:
         raise SurgeError(f"unknown policy {unknown[0]!r}; choose from {', '.join(policy_names())}")
+    if args.resume and not args.json:
+        raise SurgeError("--resume needs --json: the results file to resume from")
     cfg = EvalConfig(
         scenario=args.scenario,
         data_dir=args.data,
@@ -111,13 +118,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         world_seed=args.world_seed,
         jobs=args.jobs,
     )
-    doc = evaluate(cfg)
+    doc = evaluate(cfg, checkpoint=args.json, resume=args.resume)
     c = doc["city"]
     print(f"{doc['scenario']}: {c['intersections']} intersections, {c['streets']} streets, {c['sectors']} sectors; "
           f"{args.taxis} taxis, {args.minutes} min, {args.seeds} seeds, date {args.date}")
     print(format_table(summarize(doc)))
     if args.json:
-        write_json(doc, args.json)
         print(f"wrote {args.json}")
     return 0
 

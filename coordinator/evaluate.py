@@ -4,6 +4,12 @@ One instance is (date, hour, seed): the requests come from the demand world
 for that date and hour, and the seed draws the fleet's initial placement.
 Every policy runs on the same instances, and the oracle always runs too,
 because wait overhead per served request is measured against it.
+
+A policy is named as in the registry, optionally with options:
+``surge:forecast=true-rate,samples=500``; the whole string labels its rows,
+so one run can compare a policy under several settings.  Long runs resume:
+with a results file, finished instances are kept and each new one is written
+as soon as it ends.
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from agents.base import EpisodeContext, Policy, make_policy
+from city.errors import ConfigError, DataError
 from city.graph import City
 from city.sim import EpisodeResult, FleetSim, Requests
 
@@ -40,6 +47,27 @@ class EvalConfig:
     policy_options: dict[str, dict] = field(default_factory=dict)
     world_seed: int = 0
     jobs: int = 1
+
+
+def parse_policy(spec: str) -> tuple[str, dict]:
+    """``"name:key=value,key=value"`` → ``(name, options)``; numbers become int or float."""
+    name, _, rest = spec.partition(":")
+    options: dict = {}
+    for item in filter(None, rest.split(",")):
+        key, eq, raw = item.partition("=")
+        if not eq or not key.strip():
+            raise ConfigError(f"policy {spec!r}: option {item!r} is not key=value")
+        options[key.strip()] = _option_value(raw.strip())
+    return name.strip(), options
+
+
+def _option_value(raw: str):
+    for conv in (int, float):
+        try:
+            return conv(raw)
+        except ValueError:
+            pass
+    return raw
 
 
 def initial_positions(city: City, n_taxis: int, seed: int) -> np.ndarray:
@@ -90,12 +118,14 @@ def _instance(cfg: EvalConfig, hour: int, seed: int) -> list[dict]:
     requests = episode_requests(scen.world, date, hour, cfg.minutes)
     start = initial_positions(scen.city, cfg.taxis, seed)
     context = EpisodeContext(city=scen.city, date=date, hour=hour, minutes=cfg.minutes, seed=seed, world=scen.world)
-    names = list(dict.fromkeys(cfg.policies + ["oracle"]))
+    labels = list(dict.fromkeys(cfg.policies + ["oracle"]))
     results: dict[str, EpisodeResult] = {}
-    for name in names:
-        policy = make_policy(name, scen.city, **cfg.policy_options.get(name, {}))
-        results[name] = run_episode(scen.city, policy, requests, start, context)
+    for label in labels:
+        name, options = parse_policy(label)
+        policy = make_policy(name, scen.city, **{**cfg.policy_options.get(label, {}), **options})
+        results[label] = run_episode(scen.city, policy, requests, start, context)
     oracle_cost = results["oracle"].total_cost
+    greedy_cost = results["greedy"].total_cost if "greedy" in results else None
     rows = []
     for name in cfg.policies:
         r = results[name]
@@ -109,6 +139,8 @@ def _instance(cfg: EvalConfig, hour: int, seed: int) -> list[dict]:
                 "served": r.served,
                 "requests": r.n_requests,
                 "wait_overhead_per_served": (r.total_cost - oracle_cost) / max(r.served, 1),
+                "oracle_cost": oracle_cost,
+                "greedy_cost": greedy_cost,
                 "plan_seconds_per_step": float(np.mean(r.plan_seconds)),
                 "decisions_sha256": r.decisions_sha256,
             }
@@ -128,18 +160,71 @@ def _scenario_cache(cfg: EvalConfig):
     return _SCENARIOS[key]
 
 
-def evaluate(cfg: EvalConfig, progress: Callable[[str], None] | None = None) -> dict:
-    """Run every (hour, seed) instance and return the ``surge.results/1`` document."""
+_RESUME_FREE = ("seeds", "jobs")
+
+
+def load_finished(cfg: EvalConfig, path: str | Path) -> list[dict]:
+    """Episodes of an earlier run of the same configuration (any seed count), to resume from."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise DataError(f"cannot resume from it ({exc})", path=path) from exc
+    if doc.get("schema") != RESULTS_SCHEMA:
+        raise DataError(f"schema {doc.get('schema')!r}, expected {RESULTS_SCHEMA!r}", path=path)
+    mine = {k: v for k, v in asdict(cfg).items() if k not in _RESUME_FREE}
+    theirs = {k: v for k, v in doc.get("config", {}).items() if k not in _RESUME_FREE}
+    for key in mine:
+        if mine[key] != theirs.get(key):
+            raise DataError(f"was written with {key}={theirs.get(key)!r}, this run has {mine[key]!r}; use another --json", path=path)
+    return list(doc["episodes"])
+
+
+def evaluate(
+    cfg: EvalConfig,
+    progress: Callable[[str], None] | None = None,
+    *,
+    checkpoint: str | Path | None = None,
+    resume: bool = False,
+) -> dict:
+    """Run every (hour, seed) instance and return the ``surge.results/1`` document.
+
+    With ``checkpoint``, the results file is rewritten after every finished
+    instance; with ``resume`` too, the instances it already holds are kept,
+    not rerun.
+    """
     progress = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
     scen = _scenario_cache(cfg)
-    tasks = [(h, s) for h in cfg.hours for s in range(cfg.seeds)]
+    for label in dict.fromkeys(cfg.policies):  # fail on a bad name or option now, not in a worker an hour in
+        name, options = parse_policy(label)
+        make_policy(name, scen.city, **{**cfg.policy_options.get(label, {}), **options})
     episodes: list[dict] = []
+    if resume and checkpoint is not None and Path(checkpoint).exists():
+        wanted = {(h, s) for h in cfg.hours for s in range(cfg.seeds)}
+        episodes = [e for e in load_finished(cfg, checkpoint) if (e["hour"], e["seed"]) in wanted]
+        if episodes:
+            progress(f"resuming from {checkpoint}: {len({(e['hour'], e['seed']) for e in episodes})} instances done")
+    done = {(e["hour"], e["seed"]) for e in episodes}
+    tasks = [(h, s) for h in cfg.hours for s in range(cfg.seeds) if (h, s) not in done]
     t0 = time.perf_counter()
 
-    def report(done: int, rows: list[dict]) -> None:
+    def document() -> dict:
+        order = {(h, s): k for k, (h, s) in enumerate((h, s) for h in cfg.hours for s in range(cfg.seeds))}
+        return {
+            "schema": RESULTS_SCHEMA,
+            "scenario": cfg.scenario,
+            "city": scen.city.summary(),
+            "config": asdict(cfg),
+            "episodes": sorted(episodes, key=lambda e: order[(e["hour"], e["seed"])]),
+        }
+
+    def report(k: int, rows: list[dict]) -> None:
+        episodes.extend(rows)
+        if checkpoint is not None:
+            write_json(document(), checkpoint)
         head = rows[0]
         costs = " ".join(f"{r['policy']}={r['total_cost']}" for r in rows)
-        progress(f"[{done}/{len(tasks)}] hour {head['hour']} seed {head['seed']}: {costs} ({time.perf_counter() - t0:.1f} s)")
+        progress(f"[{k}/{len(tasks)}] hour {head['hour']} seed {head['seed']}: {costs} ({time.perf_counter() - t0:.1f} s)")
 
     if cfg.jobs > 1:
         import multiprocessing as mp
@@ -151,25 +236,20 @@ def evaluate(cfg: EvalConfig, progress: Callable[[str], None] | None = None) -> 
         with ProcessPoolExecutor(max_workers=cfg.jobs, mp_context=mp.get_context("spawn")) as pool:
             futures = [pool.submit(_instance, cfg, h, s) for h, s in tasks]
             for k, fut in enumerate(futures, 1):
-                rows = fut.result()
-                episodes.extend(rows)
-                report(k, rows)
+                report(k, fut.result())
     else:
         for k, (h, s) in enumerate(tasks, 1):
-            rows = _instance(cfg, h, s)
-            episodes.extend(rows)
-            report(k, rows)
-    return {
-        "schema": RESULTS_SCHEMA,
-        "scenario": cfg.scenario,
-        "city": scen.city.summary(),
-        "config": asdict(cfg),
-        "episodes": episodes,
-    }
+            report(k, _instance(cfg, h, s))
+    return document()
 
 
 def summarize(doc: dict) -> list[dict]:
-    """Mean and standard deviation of every metric per (hour, policy)."""
+    """Mean and standard deviation of every metric per (hour, policy).
+
+    ``gap_closed`` is the share of the greedy→oracle gap in mean total cost
+    that the policy closes, (greedy - policy) / (greedy - oracle), where the
+    run included greedy (the paper's yardstick).
+    """
     out = []
     eps = doc["episodes"]
     hours = sorted({e["hour"] for e in eps})
@@ -183,25 +263,38 @@ def summarize(doc: dict) -> list[dict]:
             for m in METRICS:
                 vals = np.array([e[m] for e in sel], dtype=float)
                 row[m] = (float(vals.mean()), float(vals.std()))
+            row["gap_closed"] = None
+            if all(e.get("greedy_cost") is not None for e in sel):
+                greedy = np.mean([e["greedy_cost"] for e in sel])
+                gap = greedy - np.mean([e["oracle_cost"] for e in sel])
+                if gap > 0:
+                    row["gap_closed"] = float((greedy - row["total_cost"][0]) / gap)
             out.append(row)
     return out
 
 
 def format_table(summary: Iterable[dict]) -> str:
-    head = f"{'hour':>4}  {'policy':<12}{'total cost':>20}{'outstanding end':>18}{'served':>16}{'wait overhead/served':>22}{'plan ms/step':>14}"
+    summary = list(summary)
+    width = max([12] + [len(r["policy"]) + 2 for r in summary])
+    head = f"{'hour':>4}  {'policy':<{width}}{'total cost':>20}{'outstanding end':>18}{'served':>16}{'wait overhead/served':>22}{'plan ms/step':>14}{'gap closed':>12}"
     lines = [head, "-" * len(head)]
     for r in summary:
         tc, oe, sv, wo, ps = (r[m] for m in METRICS)
         lines.append(
-            f"{r['hour']:>4}  {r['policy']:<12}"
+            f"{r['hour']:>4}  {r['policy']:<{width}}"
             f"{tc[0]:>11.1f} ± {tc[1]:<6.1f}"
             f"{oe[0]:>9.1f} ± {oe[1]:<6.1f}"
             f"{sv[0]:>8.1f} ± {sv[1]:<5.1f}"
             f"{wo[0]:>13.2f} ± {wo[1]:<6.2f}"
             f"{ps[0] * 1e3:>12.2f}"
+            + (f"{100 * r['gap_closed']:>11.1f}%" if r.get("gap_closed") is not None else f"{'—':>12}")
         )
     return "\n".join(lines)
 
 
 def write_json(doc: dict, path: str | Path) -> None:
-    Path(path).write_text(json.dumps(doc, indent=1))
+    """Write atomically, so an interrupted run never leaves half a results file."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(doc, indent=1))
+    tmp.replace(path)

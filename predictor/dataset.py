@@ -190,11 +190,20 @@ def base_rows(data: YearData, norm: Normaliser, hours: np.ndarray, sectors: np.n
     return norm.base(data.temporal[hours], data.weather[hours], sectors, data.n_sectors)
 
 
-def standard_training_set(data: YearData, norm: Normaliser) -> tuple[np.ndarray, np.ndarray]:
-    """Every (hour, sector) of the training months, events or not."""
+def standard_training_set(data: YearData, norm: Normaliser, *, without_events: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Every (hour, sector) of the training months; only those with no active event if ``without_events``.
+
+    The ablation's standard network sees them all.  The system's no-event
+    network is only ever asked about sector-hours without an event, so it is
+    fitted on exactly those: event surges would otherwise raise its estimate of
+    a quiet evening in every sector that hosts events.
+    """
     H, S = data.split_hour, data.n_sectors
     hours = np.repeat(np.arange(H), S)
     sectors = np.tile(np.arange(S), H)
+    if without_events:
+        keep = ~data.has_event()[:H].ravel()
+        hours, sectors = hours[keep], sectors[keep]
     X = base_rows(data, norm, hours, sectors)
     y = norm.target(data.counts[hours, sectors])
     return X, y

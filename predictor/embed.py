@@ -10,15 +10,16 @@ downloads anything.
 Cache
 -----
 Embeddings are stored under ``<root>/embeddings/<model key>/`` as ``.npz``
-shards, each holding ``keys`` (SHA-1 of the UTF-8 text, 20 bytes) and ``vecs``
-(float32).  ``<root>`` is, in order: the ``cache_dir`` argument (``--cache``),
+shards, each holding ``keys`` (SHA-1 of the UTF-8 text, ``(n, 20)`` uint8) and
+``vecs`` (float32).  ``<root>`` is, in order: the ``cache_dir`` argument (``--cache``),
 ``$SURGE_CACHE``, ``~/.cache/surge``.  A shard is written atomically (temp file
 + rename) after each embedding call, so concurrent runs and interrupted runs
 never leave a half-written shard, and a second run embeds nothing.  Many
 shards are compacted into one when they pile up.
 
 Texts are de-duplicated before embedding (reviews repeat across the events of a
-venue) and embedded in batches of 256.
+venue) and embedded in batches of 256; a shard is written every few thousand
+texts, so an interrupted run keeps what it embedded, and progress is printed.
 """
 
 from __future__ import annotations
@@ -39,7 +40,9 @@ from city.errors import ConfigError
 DEFAULT_ENCODER = "all-MiniLM-L6-v2"
 _DEFAULT_ALIASES = {"", "default", "all-minilm-l6-v2", "sentence-transformers/all-minilm-l6-v2"}
 BATCH_SIZE = 256
+CHUNK = 4096
 _COMPACT_AT = 24
+_KEY_BYTES = 20
 
 
 def cache_root(cache_dir: str | os.PathLike | None = None) -> Path:
@@ -120,6 +123,17 @@ def _model_key(label: str, path: Path | None) -> str:
     return f"{safe}-{h.hexdigest()[:10]}"
 
 
+def _encode_keys(keys: Sequence[bytes]) -> np.ndarray:
+    """Digests as a ``(n, 20)`` uint8 array (a fixed-width bytes dtype would drop trailing NULs)."""
+    return np.frombuffer(b"".join(keys), dtype=np.uint8).reshape(len(keys), _KEY_BYTES)
+
+
+def _decode_keys(keys: np.ndarray) -> list[bytes]:
+    if keys.dtype.kind == "S":  # shards of earlier versions: restore the NULs numpy stripped
+        return [k.ljust(_KEY_BYTES, b"\0") for k in keys.tolist()]
+    return [bytes(row) for row in np.asarray(keys, dtype=np.uint8)]
+
+
 class EmbeddingCache:
     """Append-only store of text embeddings for one model: ``.npz`` shards in a directory."""
 
@@ -144,7 +158,7 @@ class EmbeddingCache:
             if len(keys) == 0:
                 continue
             self.dim = int(vecs.shape[1])
-            for k, v in zip(keys.tolist(), vecs):
+            for k, v in zip(_decode_keys(keys), vecs):
                 self._mem[k] = v
 
     def get(self, keys: Sequence[bytes]) -> tuple[dict[bytes, np.ndarray], list[bytes]]:
@@ -159,7 +173,7 @@ class EmbeddingCache:
         vecs = np.ascontiguousarray(vecs, dtype=np.float32)
         self.dir.mkdir(parents=True, exist_ok=True)
         name = f"shard-{time.strftime('%Y%m%d%H%M%S')}-{os.getpid()}-{uuid.uuid4().hex[:8]}.npz"
-        self._write(self.dir / name, np.array(keys, dtype="S20"), vecs)
+        self._write(self.dir / name, _encode_keys(keys), vecs)
         self._loaded.add(name)
         for k, v in zip(keys, vecs):
             self._mem[k] = v
@@ -183,7 +197,7 @@ class EmbeddingCache:
         keys = list(self._mem.keys())
         vecs = np.stack([self._mem[k] for k in keys]) if keys else np.zeros((0, self.dim or 0), np.float32)
         name = f"merged-{time.strftime('%Y%m%d%H%M%S')}-{uuid.uuid4().hex[:8]}.npz"
-        self._write(self.dir / name, np.array(keys, dtype="S20"), vecs)
+        self._write(self.dir / name, _encode_keys(keys), vecs)
         self._loaded.add(name)
         for s in shards:
             try:
@@ -249,6 +263,33 @@ class Embedder:
         get = getattr(m, "get_embedding_dimension", None) or m.get_sentence_embedding_dimension
         return int(get())
 
+    def _embed_missing(self, todo: list[str], keys: list[bytes]) -> np.ndarray:
+        """Encode ``todo`` in chunks, caching and reporting progress after each."""
+        t0 = time.perf_counter()
+        if self.verbose:
+            print(f"embedding {len(todo)} new texts with {self.encoder} (batch {self.batch_size}) …", flush=True)
+        parts = []
+        for i in range(0, len(todo), CHUNK):
+            vecs = self.model.encode(
+                todo[i : i + CHUNK],
+                batch_size=self.batch_size,
+                convert_to_numpy=True,
+                show_progress_bar=False,
+            ).astype(np.float32)
+            if self.cache is not None:
+                self.cache.put(keys[i : i + CHUNK], vecs)
+            parts.append(vecs)
+            done = i + len(vecs)
+            if self.verbose and len(todo) > CHUNK:
+                el = time.perf_counter() - t0
+                print(f"  embedded {done}/{len(todo)} texts, {el:.0f}s ({done / max(el, 1e-9):.0f}/s)", flush=True)
+        dt_s = time.perf_counter() - t0
+        self.stats["embedded"] += len(todo)
+        self.stats["embed_seconds"] += dt_s
+        if self.verbose:
+            print(f"embedded {len(todo)} texts in {dt_s:.1f}s ({len(todo) / max(dt_s, 1e-9):.0f}/s)", flush=True)
+        return np.concatenate(parts)
+
     def embed(self, texts: Iterable[str]) -> np.ndarray:
         """Embeddings ``(len(texts), d)`` float32, in the order given."""
         texts = [t if isinstance(t, str) else str(t) for t in texts]
@@ -263,24 +304,7 @@ class Embedder:
         else:
             found, missing = {}, list(uniq)
         if missing:
-            t0 = time.perf_counter()
-            todo = [uniq[k] for k in missing]
-            if self.verbose:
-                print(f"embedding {len(todo)} new texts with {self.encoder} (batch {self.batch_size}) …", flush=True)
-            vecs = self.model.encode(
-                todo,
-                batch_size=self.batch_size,
-                convert_to_numpy=True,
-                show_progress_bar=False,
-            ).astype(np.float32)
-            dt_s = time.perf_counter() - t0
-            self.stats["embedded"] += len(todo)
-            self.stats["embed_seconds"] += dt_s
-            if self.verbose:
-                print(f"embedded {len(todo)} texts in {dt_s:.1f}s ({len(todo) / max(dt_s, 1e-9):.0f}/s)", flush=True)
-            if self.cache is not None:
-                self.cache.put(missing, vecs)
-            found.update(zip(missing, vecs))
+            found.update(zip(missing, self._embed_missing([uniq[k] for k in missing], missing)))
         if not texts:
             return np.zeros((0, self.dim), np.float32)
         return np.stack([found[k] for k in keys]).astype(np.float32, copy=False)

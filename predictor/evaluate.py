@@ -4,8 +4,10 @@ For every test day (September–December) and sector, at each hour h of the
 window:
 
 * ``pe_event_nn``: the paper's system: the event network where the sector has
-  an active event in that hour, else the standard network;
-* ``pe_standard_nn``: the temporal/weather network everywhere;
+  an active event in that hour, else the no-event network (temporal/weather
+  features, fitted on sector-hours without events);
+* ``pe_standard_nn``: the ablation: a temporal/weather network fitted on all
+  sector-hours, used everywhere;
 * ``pe_previous_hour``: the realised count of hour h-1 in the same sector
   (Garces et al. 2023).
 
@@ -43,12 +45,12 @@ def percent_error(y: np.ndarray, yhat: np.ndarray, sector: np.ndarray, n_sectors
 
 
 def predictions(model, data: YearData) -> dict[str, np.ndarray]:
-    """ŷ for every test hour and sector from both networks: arrays ``(H_test, S)``."""
+    """ŷ for every test hour and sector from the system and the baselines: arrays ``(H_test, S)``."""
     H0, H, S = data.split_hour, data.n_hours, data.n_sectors
     hours = np.repeat(np.arange(H0, H), S)
     sectors = np.tile(np.arange(S), H - H0)
     std = model.predict_standard(data.temporal[hours], data.weather[hours], sectors).reshape(H - H0, S)
-    ev = std.copy()
+    ev = model.predict_no_event(data.temporal[hours], data.weather[hours], sectors).reshape(H - H0, S)
     sel = data.ev_hour >= H0
     if sel.any():
         h, s = data.ev_hour[sel], data.ev_sector[sel]

@@ -4,45 +4,26 @@
 ``when``:
 
 * ``eta`` ``(S,)``: per-minute request rate ŷ_s / 60 (ŷ from the event network
-  where the sector has an active event, else the standard network);
+  where the sector has an active event, else the no-event network);
 * ``rho``, ``delta`` ``(n,)``: pickup / drop-off intersection probabilities,
   each summing to 1 within every sector (occupancy-based assignment);
 * ``beta`` ``(S, S)``: drop-off sector given pickup sector (historical).
 
-It returns ``agents.forecast.Forecast`` when that module exists (the rollout
-engineer's torch-free dataclass), otherwise a plain dict with the same keys.
+It returns the rollout's torch-free ``agents.forecast.Forecast``.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import datetime as dt
 from pathlib import Path
 
 import numpy as np
 
+from agents.forecast import Forecast
+from city.errors import ConfigError
 from predictor.assign import estimate_beta, node_distribution
 from predictor.features import active_events
 from predictor.model import DemandModel
-
-
-def _forecast_type():
-    try:
-        from agents.forecast import Forecast  # torch-free, owned by the rollout engineer
-    except ImportError:
-        return None
-    return Forecast
-
-
-def make_forecast(eta: np.ndarray, rho: np.ndarray, delta: np.ndarray, beta: np.ndarray, **extra):
-    fields = {"eta": eta, "rho": rho, "delta": delta, "beta": beta}
-    cls = _forecast_type()
-    if cls is None:
-        return {**fields, **extra}
-    if dataclasses.is_dataclass(cls):
-        names = {f.name for f in dataclasses.fields(cls)}
-        return cls(**fields, **{k: v for k, v in extra.items() if k in names})
-    return cls(**fields)
 
 
 class ModelForecaster:
@@ -74,7 +55,7 @@ class ModelForecaster:
         """ŷ ``(S,)`` hourly counts and the has-event mask for the hour beginning ``when``."""
         S = int(world.city.n_sectors)
         if S != self.model.n_sectors:
-            raise ValueError(f"model was trained on {self.model.n_sectors} sectors, world has {S}")
+            raise ConfigError(f"model was trained on {self.model.n_sectors} sectors, the world has {S}")
         when = when.replace(minute=0, second=0, microsecond=0)
         by_sector: dict[int, list] = {}
         lead, lag = self.model.window
@@ -96,7 +77,7 @@ class ModelForecaster:
     def forecast(self, world, when: dt.datetime):
         y, has = self.predict_counts(world, when)
         p = node_distribution(world.city, world.locale_counts, when)
-        return make_forecast(
+        return Forecast(
             eta=(y / 60.0).astype(np.float64),
             rho=p,
             delta=p.copy(),

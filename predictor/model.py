@@ -3,8 +3,9 @@
 Model directory layout::
 
     model.json          schema, scenario, features, normalisation, settings, losses, versions
-    standard.pt         state_dict of the standard network (2 x 256)
+    no_event.pt         state_dict of the system's no-event network (2 x 256)
     event.pt            state_dict of the event network (2 x 4096)
+    standard.pt         state_dict of the ablation's standard network (2 x 256)
     beta.npy            β: drop-off sector given pickup sector, (S, S), from the training months
     checkpoints/*.pt    per-epoch checkpoints (for resume; safe to delete once trained)
 """
@@ -36,16 +37,25 @@ from predictor.features import LAG_HOURS, LEAD_HOURS, EventFeaturizer, N_TEMPORA
 from predictor.nets import EVENT_HIDDEN, STANDARD_HIDDEN, DemandMLP, configure_threads
 from predictor.train import TrainConfig, fit, predict, versions
 
-SCHEMA = "surge.predictor.model/1"
+SCHEMA = "surge.predictor.model/2"
+NETWORKS = ("standard", "no_event", "event")
 
 
 class DemandModel:
-    """The two networks plus their feature normalisation."""
+    """The paper's two networks, the ablation's standard network, and their normalisation.
 
-    def __init__(self, meta: dict, norm: Normaliser, standard: DemandMLP, event: DemandMLP | None, beta: np.ndarray | None = None, directory: Path | None = None) -> None:
+    The system predicts with ``event`` where a sector has an active event and
+    with ``no_event`` elsewhere; both temporal/weather networks have the same
+    shape, but ``no_event`` is fitted only on sector-hours without events,
+    ``standard`` on all of them (it is the ablation's baseline, the best a
+    network without event knowledge can do).
+    """
+
+    def __init__(self, meta: dict, norm: Normaliser, standard: DemandMLP, no_event: DemandMLP, event: DemandMLP | None, beta: np.ndarray | None = None, directory: Path | None = None) -> None:
         self.meta = meta
         self.norm = norm
         self.standard = standard
+        self.no_event = no_event
         self.event = event
         self.beta = beta
         self.directory = directory
@@ -58,19 +68,22 @@ class DemandModel:
     def predict_standard(self, temporal: np.ndarray, weather: np.ndarray, sectors: np.ndarray) -> np.ndarray:
         return self.norm.counts(predict(self.standard, self.base_features(temporal, weather, sectors)))
 
+    def predict_no_event(self, temporal: np.ndarray, weather: np.ndarray, sectors: np.ndarray) -> np.ndarray:
+        return self.norm.counts(predict(self.no_event, self.base_features(temporal, weather, sectors)))
+
     def predict_event(self, temporal: np.ndarray, weather: np.ndarray, sectors: np.ndarray, F: np.ndarray) -> np.ndarray:
         if self.event is None:
-            return self.predict_standard(temporal, weather, sectors)
+            return self.predict_no_event(temporal, weather, sectors)
         X = np.hstack([self.base_features(temporal, weather, sectors), self.norm.event(F)])
         return self.norm.counts(predict(self.event, X))
 
     def predict_hour(self, when: dt.datetime, weather, F: np.ndarray, has_event: np.ndarray) -> np.ndarray:
-        """ŷ for every sector in the hour beginning ``when`` (event network where ``has_event``)."""
+        """ŷ for every sector in the hour beginning ``when`` (event network where ``has_event``, else no-event)."""
         S = self.n_sectors
         tf = np.repeat(temporal_features(when)[None, :], S, axis=0)
         wf = np.repeat(weather_at(weather, when)[None, :], S, axis=0)
         sectors = np.arange(S)
-        y = self.predict_standard(tf, wf, sectors)
+        y = self.predict_no_event(tf, wf, sectors)
         if has_event.any() and self.event is not None:
             sel = np.flatnonzero(has_event)
             y[sel] = self.predict_event(tf[sel], wf[sel], sectors[sel], F[sel])
@@ -81,6 +94,7 @@ class DemandModel:
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         _atomic_torch(self.standard.state_dict(), directory / "standard.pt")
+        _atomic_torch(self.no_event.state_dict(), directory / "no_event.pt")
         if self.event is not None:
             _atomic_torch(self.event.state_dict(), directory / "event.pt")
         if self.beta is not None:
@@ -108,16 +122,12 @@ class DemandModel:
         configure_threads()
         norm = Normaliser.from_json(meta["normalisation"])
         nets = meta["networks"]
-        standard = DemandMLP(int(nets["standard"]["n_in"]), tuple(nets["standard"]["hidden"]))
-        standard.load_state_dict(torch.load(directory / "standard.pt", map_location="cpu", weights_only=True))
-        standard.eval()
-        event = None
-        if (directory / "event.pt").exists():
-            event = DemandMLP(int(nets["event"]["n_in"]), tuple(nets["event"]["hidden"]))
-            event.load_state_dict(torch.load(directory / "event.pt", map_location="cpu", weights_only=True))
-            event.eval()
+        loaded = {name: _load_net(directory, name, nets[name]) for name in NETWORKS if (directory / f"{name}.pt").exists()}
+        for name in ("standard", "no_event"):
+            if name not in loaded:
+                raise DataError(f"network file {name}.pt is missing", path=directory)
         beta = np.load(directory / "beta.npy") if (directory / "beta.npy").exists() else None
-        return cls(meta, norm, standard, event, beta, directory)
+        return cls(meta, norm, loaded["standard"], loaded["no_event"], loaded.get("event"), beta, directory)
 
     @property
     def window(self) -> tuple[int, int]:
@@ -132,6 +142,13 @@ class DemandModel:
                 f"encoder {self.meta['encoder']['name']!r} resolves to {emb.model_key}, but the model was trained with {self.meta['encoder']['model_key']}"
             )
         return EventFeaturizer(emb, n_clusters=f["n_clusters"], gamma=f["gamma"], q_max=f["q_max"], seed=f["cluster_seed"], verbose=verbose)
+
+
+def _load_net(directory: Path, name: str, spec: dict) -> DemandMLP:
+    net = DemandMLP(int(spec["n_in"]), tuple(spec["hidden"]))
+    net.load_state_dict(torch.load(directory / f"{name}.pt", map_location="cpu", weights_only=True))
+    net.eval()
+    return net
 
 
 def _atomic_torch(obj, path: Path) -> None:
@@ -160,7 +177,7 @@ def train_model(
     log: Callable[[str], None] | None = print,
     data: YearData | None = None,
 ) -> DemandModel:
-    """Build features from ``world``, train both networks, save everything to ``out``."""
+    """Build features from ``world``, train the three networks, save everything to ``out``."""
     from predictor.assign import estimate_beta
 
     cfg = cfg or TrainConfig()
@@ -177,13 +194,20 @@ def train_model(
     norm = Normaliser.fit(data)
 
     Xs, ys = standard_training_set(data, norm)
+    Xq, yq = standard_training_set(data, norm, without_events=True)
     Xe, ye = event_training_set(data, norm)
     if log:
-        log(f"training: standard network on {len(ys)} sector-hours, event network on {len(ye)} event sector-hours (Jan–Aug {data.year})")
+        log(
+            f"training (Jan–Aug {data.year}): standard network on {len(ys)} sector-hours, "
+            f"no-event network on the {len(yq)} without events, event network on the {len(ye)} with events"
+        )
     ck = out / "checkpoints"
     t0 = time.perf_counter()
     rs = fit("standard", Xs, ys, standard_hidden, cfg, checkpoint=ck / "standard.pt", log=log)
     t_std = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rq = fit("no_event", Xq, yq, standard_hidden, cfg, checkpoint=ck / "no_event.pt", log=log)
+    t_quiet = time.perf_counter() - t0
     ecfg = cfg if event_epochs is None else TrainConfig(**{**cfg.to_json(), "epochs": event_epochs})
     t0 = time.perf_counter()
     re_ = fit("event", Xe, ye, event_hidden, ecfg, checkpoint=ck / "event.pt", log=log)
@@ -222,14 +246,15 @@ def train_model(
         },
         "networks": {
             "standard": {"n_in": int(Xs.shape[1]), "hidden": list(standard_hidden), "n_train": int(len(ys)), "epochs": len(rs.losses), "losses": rs.losses, "seconds": round(t_std, 1)},
+            "no_event": {"n_in": int(Xq.shape[1]), "hidden": list(standard_hidden), "n_train": int(len(yq)), "epochs": len(rq.losses), "losses": rq.losses, "seconds": round(t_quiet, 1)},
             "event": {"n_in": int(Xe.shape[1]), "hidden": list(event_hidden), "n_train": int(len(ye)), "epochs": len(re_.losses), "losses": re_.losses, "seconds": round(t_ev, 1)},
         },
         "training": {**cfg.to_json(), "event_epochs": ecfg.epochs, "loss": "MSE", "optimizer": "Adam", "threads": torch.get_num_threads()},
         "beta": beta_info,
-        "timings": {**data.timings, "train_standard_s": round(t_std, 1), "train_event_s": round(t_ev, 1), "beta_s": round(t_beta, 1), "total_s": round(time.perf_counter() - t_start, 1)},
+        "timings": {**data.timings, "train_standard_s": round(t_std, 1), "train_no_event_s": round(t_quiet, 1), "train_event_s": round(t_ev, 1), "beta_s": round(t_beta, 1), "total_s": round(time.perf_counter() - t_start, 1)},
         "versions": versions(),
     }
-    model = DemandModel(meta, norm, rs.net, re_.net if len(ye) else None, beta, out)
+    model = DemandModel(meta, norm, rs.net, rq.net, re_.net if len(ye) else None, beta, out)
     model.save(out)
     if log:
         log(f"saved model to {out} ({meta['timings']['total_s']:.0f}s in all)")

@@ -23,6 +23,10 @@ def run_cli(*args: str) -> subprocess.CompletedProcess:
         (["evaluate", "--scenario", "atlantis"], "unknown scenario 'atlantis'"),
         (["evaluate", "--scenario", "nyc"], "needs --data DIR"),
         (["evaluate", "--scenario", "nyc", "--data", "/nonexistent/dir"], "data directory /nonexistent/dir does not exist"),
+        (["evaluate", "--policies", "surge:samples"], "option 'samples' is not key=value"),
+        (["evaluate", "--policies", "greedy:speed=2", "--seeds", "1", "--minutes", "1"], "policy 'greedy': unknown options ['speed']"),
+        (["evaluate", "--policies", "surge:colour=red", "--seeds", "1", "--minutes", "1"], "policy 'surge'"),
+        (["evaluate", "--resume"], "--resume needs --json"),
     ],
 )
 def test_bad_options_give_one_line_and_exit_2(args: list[str], message: str, capsys: pytest.CaptureFixture) -> None:

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import pytest
 
-from coordinator.evaluate import EvalConfig, evaluate, summarize
+from city.errors import ConfigError, DataError
+from coordinator.evaluate import EvalConfig, evaluate, parse_policy, summarize
 
 
 @pytest.fixture(scope="module")
@@ -37,3 +41,40 @@ def test_oracle_is_cheapest_and_has_zero_overhead(small_run: dict) -> None:
     assert rows["oracle"]["total_cost"][0] < rows["ia"]["total_cost"][0]
     assert rows["oracle"]["wait_overhead_per_served"][0] == 0.0
     assert rows["greedy"]["wait_overhead_per_served"][0] > 0.0
+
+
+def test_gap_closed_is_measured_against_greedy_and_oracle(small_run: dict) -> None:
+    rows = {r["policy"]: r for r in summarize(small_run)}
+    assert rows["greedy"]["gap_closed"] == pytest.approx(0.0)
+    assert rows["oracle"]["gap_closed"] == pytest.approx(1.0)
+    eps = [e for e in small_run["episodes"] if e["policy"] == "ia"]
+    greedy = sum(e["greedy_cost"] for e in eps)
+    oracle = sum(e["oracle_cost"] for e in eps)
+    assert rows["ia"]["gap_closed"] == pytest.approx((greedy - sum(e["total_cost"] for e in eps)) / (greedy - oracle))
+
+
+def test_policy_specs_carry_options() -> None:
+    assert parse_policy("surge:forecast=true-rate,samples=50,horizon=4") == ("surge", {"forecast": "true-rate", "samples": 50, "horizon": 4})
+    assert parse_policy("greedy") == ("greedy", {})
+    with pytest.raises(ConfigError, match="key=value"):
+        parse_policy("surge:samples")
+    cfg = EvalConfig(hours=[19], seeds=1, taxis=10, minutes=5, policies=["greedy:colour=red"])
+    with pytest.raises(ConfigError, match="colour"):
+        evaluate(cfg, progress=lambda _msg: None)
+
+
+def test_resume_keeps_finished_instances(small_run: dict, tmp_path: Path) -> None:
+    path = tmp_path / "r.json"
+    one = EvalConfig(hours=[19], seeds=1, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"])
+    evaluate(one, progress=lambda _msg: None, checkpoint=path)
+    first = json.loads(path.read_text())["episodes"]
+    assert len(first) == 3
+    msgs: list[str] = []
+    two = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"])
+    doc = evaluate(two, progress=msgs.append, checkpoint=path, resume=True)
+    assert msgs[0].startswith("resuming") and "[1/1]" in msgs[1] and len(msgs) == 2  # only seed 1 ran
+    assert doc["episodes"][:3] == first
+    assert [e["decisions_sha256"] for e in doc["episodes"]] == [e["decisions_sha256"] for e in small_run["episodes"]]
+    other = EvalConfig(hours=[19], seeds=2, taxis=30, minutes=20, policies=["greedy", "ia", "oracle"])
+    with pytest.raises(DataError, match="taxis=40"):
+        evaluate(other, progress=lambda _msg: None, checkpoint=path, resume=True)

@@ -122,6 +122,17 @@ def test_embedding_offline_and_cached(cache: Path) -> None:
     assert np.array_equal(w[0], v[1])
 
 
+
+def test_cache_keeps_digests_ending_in_nul(tmp_path: Path) -> None:
+    from predictor.embed import EmbeddingCache
+
+    keys = [bytes(range(1, 20)) + b"\0", b"\0" * 20, bytes(range(20, 40))]
+    vecs = np.arange(6, dtype=np.float32).reshape(3, 2)
+    EmbeddingCache(tmp_path).put(keys, vecs)
+    found, missing = EmbeddingCache(tmp_path).get(keys)
+    assert missing == []
+    assert all(np.array_equal(found[k], v) for k, v in zip(keys, vecs))
+
 def test_spectral_clustering_recovers_planted_clusters() -> None:
     from predictor.cluster import review_representation, spectral_labels
 
@@ -174,6 +185,21 @@ def trained(world: TinyWorld, cache: Path, tmp_path_factory) -> Path:
     return out
 
 
+def test_no_event_network_never_sees_event_hours(world: TinyWorld, cache: Path) -> None:
+    from predictor.dataset import Normaliser, build_year_data, event_training_set, standard_training_set
+    from predictor.embed import Embedder
+    from predictor.features import EventFeaturizer
+
+    data = build_year_data(world, EventFeaturizer(Embedder(None, cache)))
+    norm = Normaliser.fit(data)
+    _, y_all = standard_training_set(data, norm)
+    _, y_quiet = standard_training_set(data, norm, without_events=True)
+    _, y_event = event_training_set(data, norm)
+    assert len(y_event) > 0 and len(y_quiet) + len(y_event) == len(y_all)
+    has = data.has_event()[: data.split_hour].ravel()
+    assert np.array_equal(y_quiet, y_all[~has])
+
+
 def test_saved_model_predicts_identically(world: TinyWorld, trained: Path, cache: Path) -> None:
     from predictor.dataset import build_year_data
     from predictor.evaluate import evaluate, predictions
@@ -186,6 +212,12 @@ def test_saved_model_predicts_identically(world: TinyWorld, trained: Path, cache
     for k in p1:
         assert np.array_equal(p1[k], p2[k])
     assert (p1["event_nn"] != p1["standard_nn"]).any()
+    has = data.has_event()[data.split_hour :]
+    H0, H, S = data.split_hour, data.n_hours, data.n_sectors
+    hours = np.repeat(np.arange(H0, H), S)
+    quiet = m1.predict_no_event(data.temporal[hours], data.weather[hours], np.tile(np.arange(S), H - H0)).reshape(H - H0, S)
+    assert np.array_equal(p1["event_nn"][~has], quiet[~has])  # the system's no-event network outside events
+    assert not np.array_equal(quiet, p1["standard_nn"])
     res = evaluate(m1, data)
     assert [r["hour"] for r in res["rows"]] == list(range(15, 22))
     assert all(r["n"] > 0 and np.isfinite(r["pe_event_nn"]) for r in res["rows"])
@@ -197,8 +229,7 @@ def test_forecast_and_assignment(world: TinyWorld, trained: Path, cache: Path) -
     fc = load_forecaster(trained, cache_dir=str(cache))
     when = world.events[-1].start  # an event hour in the test months
     f = fc.forecast(world, when)
-    get = (lambda k: f[k]) if isinstance(f, dict) else (lambda k: getattr(f, k))
-    eta, rho, delta, beta = get("eta"), get("rho"), get("delta"), get("beta")
+    eta, rho, delta, beta = f.eta, f.rho, f.delta, f.beta
     S, n = world.city.n_sectors, world.city.n_nodes
     assert eta.shape == (S,) and (eta >= 0).all()
     assert rho.shape == (n,) and delta.shape == (n,)
@@ -210,12 +241,8 @@ def test_forecast_and_assignment(world: TinyWorld, trained: Path, cache: Path) -
 
 
 def test_malformed_event_file_clear_error(tmp_path: Path, world: TinyWorld) -> None:
-    import city.events as events
-
-    read_events = getattr(events, "read_events", None)
-    if read_events is None:
-        pytest.skip("city.events.read_events not written yet")
     from city.errors import DataError
+    from city.events import read_events
 
     bad = tmp_path / "events.csv"
     bad.write_text("event_id,title,start,end\nx1,Concert,not-a-date,2022-01-01 20:00\n")
