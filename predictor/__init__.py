@@ -13,9 +13,9 @@ cluster     spectral clustering of review embeddings -> R_w (numpy/scikit-learn)
 holidays    US federal holidays, computed
 features    temporal/weather/sector features and the sector event feature F_s
 dataset     builds the year's training and test arrays from a demand world
-nets        the two feed-forward networks (torch)
+nets        the feed-forward networks (torch)
 train       training with per-epoch checkpoints and resume (torch)
-evaluate    the paper's percent-error ablation (standard NN, event NN, previous hour)
+evaluate    the paper's percent-error ablation (event system, standard NN, previous hour)
 assign      demand assignment: occupancy-based rho/delta and historical beta
 forecast    ModelForecaster / load_forecaster for the rollout agents
 cli         ``surge predictor train|eval``

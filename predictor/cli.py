@@ -12,11 +12,11 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("predictor", help="train and evaluate the event-informed demand predictor")
     sub = p.add_subparsers(dest="predictor_command", required=True, metavar="{train,eval}")
 
-    t = sub.add_parser("train", help="embed events, train the standard and event networks (resumable)")
+    t = sub.add_parser("train", help="embed events, train the no-event, event and standard networks (resumable)")
     t.add_argument("--scenario", choices=("synthetic", "nyc"), default="synthetic")
     t.add_argument("--data", default=None, help="data directory laid out like shared/data (needed for nyc)")
     t.add_argument("--out", required=True, help="model directory to write (and resume from)")
-    t.add_argument("--epochs", type=int, default=100, help="epochs for both networks (paper: 100)")
+    t.add_argument("--epochs", type=int, default=100, help="epochs for every network (paper: 100)")
     t.add_argument("--event-epochs", type=int, default=None, help="epochs for the event network only (default: --epochs)")
     t.add_argument("--encoder", default=None, help="sentence-transformers model name or path (default: bundled all-MiniLM-L6-v2)")
     t.add_argument("--seed", type=int, default=0, help="torch seed (initialisation and shuffles)")
@@ -28,7 +28,7 @@ def add_parser(subparsers) -> None:
     t.add_argument("--trips", nargs="+", default=None, help="HV-FHV trip parquet files: real hourly counts and β instead of the world's")
     t.set_defaults(func=train_main)
 
-    e = sub.add_parser("eval", help="percent error per hour 15-21 h: event NN vs standard NN vs previous hour")
+    e = sub.add_parser("eval", help="percent error per hour 15-21 h: the event system vs the standard NN vs previous hour")
     e.add_argument("--model", required=True, help="trained model directory")
     e.add_argument("--json", default=None, help="write results as JSON here")
     e.add_argument("--plot", default=None, help="write a PNG line chart here")
@@ -67,15 +67,9 @@ class _RealInputsWorld:
 
 
 def load_world(scenario: str, data_dir: str | None, *, seed: int = 0, year: int = 2022, events: str | None = None, reviews: str | None = None, trips=None):
-    try:
-        from city.scenario import load_scenario
-    except ImportError as exc:  # pragma: no cover - scenario module is part of city
-        raise ConfigError(f"city.scenario is not available ({exc})") from exc
-    try:
-        sc = load_scenario(scenario, data_dir, year=year, seed=seed)
-    except ImportError as exc:
-        raise ConfigError(f"scenario {scenario!r}: the demand world is not available yet ({exc})") from exc
-    world = sc.world if hasattr(sc, "world") else sc[1]
+    from city.scenario import load_scenario
+
+    world = load_scenario(scenario, data_dir, year=year, seed=seed).world
     ev = tr = None
     if events:
         ev = read_event_file(Path(events), world.city, Path(reviews) if reviews else None)
@@ -90,10 +84,8 @@ def load_world(scenario: str, data_dir: str | None, *, seed: int = 0, year: int 
 
 def read_event_file(path: Path, city, reviews: Path | None = None) -> list:
     """Events from a user file: the NYC permitted-events CSV, or surge's CSV/JSON listing."""
-    try:
-        from city.events import read_events, read_permitted_events
-    except ImportError as exc:
-        raise ConfigError("--events needs city.events.read_events, which this checkout lacks") from exc
+    from city.events import read_events, read_permitted_events
+
     if not path.is_file():
         raise ConfigError(f"--events: {path} does not exist")
     with open(path, encoding="utf-8", errors="replace") as fh:

@@ -1,6 +1,7 @@
-"""The two feed-forward demand networks of the paper (torch).
+"""The feed-forward demand networks of the paper (torch).
 
-* standard network: base features f → 2 hidden layers of 256 (ReLU) → 1
+* temporal/weather network: base features f → 2 hidden layers of 256 (ReLU) → 1
+  (the system's no-event network and the ablation's standard network)
 * event network: [f, F_s] → 2 hidden layers of 4096 (ReLU) → 1
 """
 
