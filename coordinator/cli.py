@@ -69,6 +69,7 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--world-seed", type=int, default=0, help="seed of the synthetic demand world")
     p.add_argument("--jobs", type=_positive, default=1, help="worker processes")
     p.add_argument("--json", default=None, help="write surge.results/1 JSON here, updated after every instance")
+    p.add_argument("--plot", default=None, help="write a PNG bar chart of total cost per hour and policy here")
     p.add_argument("--resume", action="store_true", help="keep the instances already in --json and run only the rest")
     p.set_defaults(func=cmd_evaluate)
 
@@ -97,7 +98,7 @@ def rollout_options(args: argparse.Namespace, names: list[str]) -> dict[str, dic
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from agents.base import policy_names
     from city.scenario import check_scenario
-    from coordinator.evaluate import EvalConfig, evaluate, format_table, parse_policy, summarize
+    from coordinator.evaluate import EvalConfig, evaluate, format_table, parse_policy, plot, summarize
 
     check_scenario(args.scenario, args.data)
     unknown = [p for p in args.policies if parse_policy(p)[0] not in policy_names()]
@@ -122,9 +123,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     c = doc["city"]
     print(f"{doc['scenario']}: {c['intersections']} intersections, {c['streets']} streets, {c['sectors']} sectors; "
           f"{args.taxis} taxis, {args.minutes} min, {args.seeds} seeds, date {args.date}")
-    print(format_table(summarize(doc)))
+    summary = summarize(doc)
+    print(format_table(summary))
     if args.json:
         print(f"wrote {args.json}")
+    if args.plot:
+        plot(summary, args.plot, title=f"{doc['scenario']} {args.date}, {args.taxis} taxis, {args.seeds} seeds")
+        print(f"wrote {args.plot}")
     return 0
 
 

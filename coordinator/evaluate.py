@@ -205,7 +205,8 @@ def evaluate(
         if episodes:
             progress(f"resuming from {checkpoint}: {len({(e['hour'], e['seed']) for e in episodes})} instances done")
     done = {(e["hour"], e["seed"]) for e in episodes}
-    tasks = [(h, s) for h in cfg.hours for s in range(cfg.seeds) if (h, s) not in done]
+    # Seed by seed across the hours, so that a run cut short has every hour at the same depth.
+    tasks = [(h, s) for s in range(cfg.seeds) for h in cfg.hours if (h, s) not in done]
     t0 = time.perf_counter()
 
     def document() -> dict:
@@ -290,6 +291,34 @@ def format_table(summary: Iterable[dict]) -> str:
             + (f"{100 * r['gap_closed']:>11.1f}%" if r.get("gap_closed") is not None else f"{'—':>12}")
         )
     return "\n".join(lines)
+
+
+def plot(summary: list[dict], path: str | Path, title: str = "") -> None:
+    """Grouped bars of mean total cost (± std) per hour and policy."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    hours = sorted({r["hour"] for r in summary})
+    policies = list(dict.fromkeys(r["policy"] for r in summary))
+    by = {(r["hour"], r["policy"]): r["total_cost"] for r in summary}
+    width = 0.8 / len(policies)
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.6 * len(hours) + 0.4 * len(policies)), 4.0), dpi=110)
+    for k, pol in enumerate(policies):
+        xs = [i + (k - (len(policies) - 1) / 2) * width for i, h in enumerate(hours) if (h, pol) in by]
+        vals = [by[h, pol] for h in hours if (h, pol) in by]
+        ax.bar(xs, [v[0] for v in vals], width, yerr=[v[1] for v in vals], capsize=2, label=pol)
+    ax.set_xticks(range(len(hours)))
+    ax.set_xticklabels([f"{h}h" for h in hours])
+    ax.set_ylabel("total cost (request-minutes waited)")
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=8, ncol=min(len(policies), 3))
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
 
 
 def write_json(doc: dict, path: str | Path) -> None:

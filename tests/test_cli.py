@@ -52,7 +52,7 @@ def test_every_subcommand_has_help() -> None:
 def test_evaluate_small_run_writes_results_json(tmp_path: Path) -> None:
     out = tmp_path / "r.json"
     proc = run_cli("evaluate", "--hours", "19", "--seeds", "2", "--taxis", "20", "--minutes", "15",
-                   "--policies", "greedy", "ia", "oracle", "--json", str(out))
+                   "--policies", "greedy", "ia", "oracle", "--json", str(out), "--plot", str(tmp_path / "r.png"))
     assert proc.returncode == 0, proc.stderr
     assert "[6/6]" not in proc.stderr and "[2/2]" in proc.stderr  # progress per instance
     doc = json.loads(out.read_text())
@@ -63,3 +63,4 @@ def test_evaluate_small_run_writes_results_json(tmp_path: Path) -> None:
     assert set(ep) >= {"hour", "seed", "policy", "total_cost", "outstanding_end", "served",
                        "wait_overhead_per_served", "plan_seconds_per_step", "decisions_sha256"}
     assert "oracle" in proc.stdout and "total cost" in proc.stdout
+    assert (tmp_path / "r.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
