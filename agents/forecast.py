@@ -173,9 +173,4 @@ class ModelForecast(ForecastProvider):
         self._forecaster = load_forecaster(model)
 
     def forecast(self, world: Any, when: dt.datetime) -> Forecast:
-        fc = self._forecaster.forecast(world, _hour_start(when))
-        if isinstance(fc, Forecast):
-            return fc
-        if isinstance(fc, dict):
-            return Forecast(eta=fc["eta"], rho=fc["rho"], delta=fc["delta"], beta=fc["beta"])
-        return Forecast(eta=fc.eta, rho=fc.rho, delta=fc.delta, beta=fc.beta)
+        return self._forecaster.forecast(world, _hour_start(when))
