@@ -313,7 +313,9 @@ def plot(summary: list[dict], path: str | Path, title: str = "") -> None:
     ax.set_xticklabels([f"{h}h" for h in hours])
     ax.set_ylabel("total cost (request-minutes waited)")
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize=8, ncol=min(len(policies), 3))
+    lo, hi = ax.get_ylim()
+    ax.set_ylim(lo, hi * 1.22)  # headroom, so the legend never covers the tallest bars
+    ax.legend(fontsize=8, ncol=min(len(policies), 3), loc="upper left")
     if title:
         ax.set_title(title)
     fig.tight_layout()
