@@ -173,4 +173,4 @@ class ModelForecast(ForecastProvider):
         self._forecaster = load_forecaster(model)
 
     def forecast(self, world: Any, when: dt.datetime) -> Forecast:
-        return self._forecaster.forecast(world, _hour_start(when))
+        return self._forecaster.forecast(world, when)
