@@ -239,10 +239,15 @@ class StepContext:
     minute0: int
 
 
+def base_controls(city: City, config: RolloutConfig, obs: Observation) -> np.ndarray:
+    """The base policy's joint control for the minute: what agents after the decider play, and a silent agent's fallback."""
+    base = greedy_controls(city, obs) if config.base == "greedy" else ia_controls(city, obs)
+    return base.astype(np.int32)
+
+
 def prepare_step(city: City, config: RolloutConfig, obs: Observation, tables: DemandTables, minute0: int) -> StepContext:
     """The shared per-minute context: the base policy's joint control."""
-    base = greedy_controls(city, obs) if config.base == "greedy" else ia_controls(city, obs)
-    return StepContext(city, config, obs, base.astype(np.int32), tables, int(minute0))
+    return StepContext(city, config, obs, base_controls(city, config, obs), tables, int(minute0))
 
 
 def candidate_controls(city: City, obs: Observation, agent: int) -> np.ndarray:
@@ -395,14 +400,17 @@ class RolloutPolicy(Policy):
         self.context = context
         self._tables = {}
 
+    def forecast(self, hour_offset: int) -> Forecast:
+        """The provider's forecast of the hour ``hour_offset`` hours after the episode's start."""
+        ctx = self.context
+        assert ctx is not None, "reset() must be called before act()"
+        when = dt.datetime.combine(ctx.date, dt.time()) + dt.timedelta(hours=ctx.hour + hour_offset)
+        return self.provider.forecast(ctx.world, when)
+
     def tables(self, hour_offset: int) -> DemandTables:
         """Demand tables for the hour ``hour_offset`` hours after the episode's start."""
         if hour_offset not in self._tables:
-            ctx = self.context
-            assert ctx is not None, "reset() must be called before act()"
-            when = dt.datetime.combine(ctx.date, dt.time()) + dt.timedelta(hours=ctx.hour + hour_offset)
-            fc = self.provider.forecast(ctx.world, when)
-            self._tables[hour_offset] = DemandTables.build(self.city, fc, self.config.ce, self.config.seed)
+            self._tables[hour_offset] = DemandTables.build(self.city, self.forecast(hour_offset), self.config.ce, self.config.seed)
         return self._tables[hour_offset]
 
     def step_context(self, obs: Observation) -> StepContext:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
+import signal
 import sys
 import time
 import warnings
@@ -98,7 +99,7 @@ def rollout_options(args: argparse.Namespace, names: list[str]) -> dict[str, dic
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from agents.base import policy_names
     from city.scenario import check_scenario
-    from coordinator.evaluate import EvalConfig, evaluate, format_table, parse_policy, plot, summarize
+    from coordinator.evaluate import EvalConfig, evaluate, parse_policy
 
     check_scenario(args.scenario, args.data)
     unknown = [p for p in args.policies if parse_policy(p)[0] not in policy_names()]
@@ -120,16 +121,61 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         jobs=args.jobs,
     )
     doc = evaluate(cfg, checkpoint=args.json, resume=args.resume)
-    c = doc["city"]
-    print(f"{doc['scenario']}: {c['intersections']} intersections, {c['streets']} streets, {c['sectors']} sectors; "
-          f"{args.taxis} taxis, {args.minutes} min, {args.seeds} seeds, date {args.date}")
-    summary = summarize(doc)
-    print(format_table(summary))
     if args.json:
         print(f"wrote {args.json}")
-    if args.plot:
-        plot(summary, args.plot, title=f"{doc['scenario']} {args.date}, {args.taxis} taxis, {args.seeds} seeds")
-        print(f"wrote {args.plot}")
+    print_results(doc, plot_path=args.plot)
+    return 0
+
+
+def print_results(doc: dict, *, policy: str | None = None, plot_path: str | None = None) -> dict:
+    """The summary table, the paired comparison of ``policy`` (default: the first surge label) and the plot."""
+    from coordinator.evaluate import compare, format_comparison, format_table, parse_policy, plot, summarize
+
+    cfg, c = doc["config"], doc["city"]
+    seeds = sorted({e["seed"] for e in doc["episodes"]})
+    print(f"{doc['scenario']}: {c['intersections']} intersections, {c['streets']} streets, {c['sectors']} sectors; "
+          f"{cfg['taxis']} taxis, {cfg['minutes']} min, {len(seeds)} seeds, date {cfg['date']}")
+    summary = summarize(doc)
+    print(format_table(summary))
+    labels = list(dict.fromkeys(e["policy"] for e in doc["episodes"]))
+    policy = policy or next((p for p in labels if parse_policy(p)[0] == "surge"), None)
+    comparison = compare(doc, policy) if policy else []
+    if comparison:
+        print()
+        print(format_comparison(comparison))
+    if plot_path:
+        plot(summary, plot_path, title=f"{doc['scenario']} {cfg['date']}, {cfg['taxis']} taxis, {len(seeds)} seeds")
+        print(f"wrote {plot_path}")
+    return {"summary": summary, "comparison": comparison}
+
+
+# ----------------------------------------------------------------------- report
+def add_report(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("report", help="tables, paired comparison and plot from a results file, without rerunning")
+    p.add_argument("results", help="surge.results/1 JSON written by surge evaluate --json")
+    p.add_argument("--policy", default=None, help="policy label to pair with the others (default: the first surge label)")
+    p.add_argument("--all-seeds", action="store_true",
+                   help="keep a seed finished at some hours only (default: seeds finished at every hour)")
+    p.add_argument("--json", default=None, help="write the summary and comparison as JSON here")
+    p.add_argument("--plot", default=None, help="write a PNG bar chart of total cost per hour and policy here")
+    p.set_defaults(func=cmd_report)
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from coordinator.evaluate import complete_seeds, read_results
+
+    path = Path(args.results)
+    doc = read_results(path)
+    full = doc if args.all_seeds else complete_seeds(doc)
+    if not full["episodes"]:
+        raise SurgeError(f"{path}: no seed is finished at every hour (use --all-seeds)")
+    dropped = len(doc["episodes"]) - len(full["episodes"])
+    if dropped:
+        print(f"left out {dropped} episodes of seeds not finished at every hour (--all-seeds keeps them)", file=sys.stderr)
+    out = print_results(full, policy=args.policy, plot_path=args.plot)
+    if args.json:
+        Path(args.json).write_text(json.dumps({"schema": "surge.report/1", "source": str(path), "seeds": sorted({e["seed"] for e in full["episodes"]}), **out}, indent=1))
+        print(f"wrote {args.json}")
     return 0
 
 
@@ -212,21 +258,23 @@ def _demand_plot(rows: list[dict], args: argparse.Namespace) -> None:
 
 # ------------------------------------------------------------------------- demo
 def add_demo(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="the 7 pm surge hour on the embedded synthetic city, baselines against surge (true-rate forecast)")
-    p.add_argument("--taxis", type=_positive, default=100)
-    p.add_argument("--minutes", type=_positive, default=60)
-    p.add_argument("--seeds", type=_positive, default=2)
-    p.add_argument("--policies", nargs="+", default=["greedy", "ia", "surge", "oracle"])
+    p = sub.add_parser("demo", help="the local multi-process fleet at the 7 pm surge on the embedded synthetic city, "
+                                     "checked decision for decision against the in-process run")
+    p.add_argument("--taxis", type=_positive, default=10, help="taxis, one agent process each")
+    p.add_argument("--minutes", type=_positive, default=30)
+    p.add_argument("--json", default=None, help="write the run's result here")
     p.set_defaults(func=cmd_demo)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    from coordinator.fleet import cmd_fleet
+
     ns = argparse.Namespace(
-        scenario="synthetic", data=None, date="2022-11-17", hours=[19], seeds=args.seeds, taxis=args.taxis,
-        minutes=args.minutes, policies=args.policies, forecast="true-rate", model=None, horizon=None, samples=None,
-        world_seed=0, jobs=2, json=None,
+        run="demo", scenario="synthetic", data=None, date="2022-11-17", hour=19, minutes=args.minutes, taxis=args.taxis,
+        seed=0, world_seed=0, policy="surge", forecast="true-rate", model=None, horizon=None, samples=None,
+        deadline=30.0, join_timeout=120.0, minute_seconds=0.0, json=args.json, check=True,
     )
-    return cmd_evaluate(ns)
+    return cmd_fleet(ns)
 
 
 # ------------------------------------------------------------------------- main
@@ -234,12 +282,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="surge", description="Event-aware routing for autonomous taxi fleets.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_evaluate(sub)
+    add_report(sub)
     add_city(sub)
     add_demand(sub)
     add_demo(sub)
     from coordinator.bench import add_parser as add_bench
+    from coordinator.fleet import add_parsers as add_fleet
 
     add_bench(sub)
+    add_fleet(sub)
     try:
         from predictor.cli import add_parser as add_predictor
     except ImportError:
@@ -253,8 +304,15 @@ def _warn_one_line(message, category, filename, lineno, file=None, line=None) ->
     print(f"surge: warning: {message}", file=sys.stderr)
 
 
+def _terminated(signum: int, frame: object) -> None:
+    """SIGTERM unwinds like Ctrl-C: worker pools are stopped and finished results stay written."""
+    print("surge: terminated", file=sys.stderr)
+    raise SystemExit(128 + signum)
+
+
 def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _warn_one_line
+    signal.signal(signal.SIGTERM, _terminated)
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

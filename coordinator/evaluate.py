@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import signal
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Iterable
@@ -148,6 +148,10 @@ def _instance(cfg: EvalConfig, hour: int, seed: int) -> list[dict]:
     return rows
 
 
+def _instance_task(task: tuple[EvalConfig, int, int]) -> list[dict]:
+    return _instance(*task)
+
+
 _SCENARIOS: dict = {}
 
 
@@ -163,15 +167,32 @@ def _scenario_cache(cfg: EvalConfig):
 _RESUME_FREE = ("seeds", "jobs")
 
 
-def load_finished(cfg: EvalConfig, path: str | Path) -> list[dict]:
-    """Episodes of an earlier run of the same configuration (any seed count), to resume from."""
+_EPISODE_FIELDS = ("hour", "seed", "policy", "oracle_cost", *METRICS)
+
+
+def read_results(path: str | Path) -> dict:
+    """A ``surge.results/1`` document, checked down to every episode's fields."""
     path = Path(path)
     try:
         doc = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise DataError(f"cannot resume from it ({exc})", path=path) from exc
-    if doc.get("schema") != RESULTS_SCHEMA:
-        raise DataError(f"schema {doc.get('schema')!r}, expected {RESULTS_SCHEMA!r}", path=path)
+    except json.JSONDecodeError as exc:
+        raise DataError(f"not JSON ({exc})", path=path) from exc
+    if not isinstance(doc, dict) or doc.get("schema") != RESULTS_SCHEMA:
+        found = doc.get("schema") if isinstance(doc, dict) else type(doc).__name__
+        raise DataError(f"schema {found!r}, expected {RESULTS_SCHEMA!r}", path=path)
+    for key in ("config", "city", "episodes"):
+        if key not in doc:
+            raise DataError(f"no {key!r} field", path=path)
+    for k, ep in enumerate(doc["episodes"]):
+        missing = [f for f in _EPISODE_FIELDS if not isinstance(ep, dict) or f not in ep]
+        if missing:
+            raise DataError(f"episode {k} has no {missing[0]!r} field", path=path)
+    return doc
+
+
+def load_finished(cfg: EvalConfig, path: str | Path) -> list[dict]:
+    """Episodes of an earlier run of the same configuration (any seed count), to resume from."""
+    doc = read_results(path)
     mine = {k: v for k, v in asdict(cfg).items() if k not in _RESUME_FREE}
     theirs = {k: v for k, v in doc.get("config", {}).items() if k not in _RESUME_FREE}
     for key in mine:
@@ -233,11 +254,13 @@ def evaluate(
 
         # Workers share the cores: each gets its slice for the compiled rollout kernels.
         os.environ.setdefault("NUMBA_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // cfg.jobs)))
-
-        with ProcessPoolExecutor(max_workers=cfg.jobs, mp_context=mp.get_context("spawn")) as pool:
-            futures = [pool.submit(_instance, cfg, h, s) for h, s in tasks]
-            for k, fut in enumerate(futures, 1):
-                report(k, fut.result())
+        # A Pool, not a ProcessPoolExecutor: leaving the block for any reason (an error,
+        # Ctrl-C, SIGTERM turned into SystemExit by the CLI) terminates the workers at once
+        # instead of waiting for their instances or leaving them orphaned. Workers ignore
+        # SIGINT so that Ctrl-C reaches only this process, which then stops them.
+        with mp.get_context("spawn").Pool(cfg.jobs, initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN)) as pool:
+            for k, rows in enumerate(pool.imap(_instance_task, [(cfg, h, s) for h, s in tasks]), 1):
+                report(k, rows)
     else:
         for k, (h, s) in enumerate(tasks, 1):
             report(k, _instance(cfg, h, s))
@@ -272,6 +295,76 @@ def summarize(doc: dict) -> list[dict]:
                     row["gap_closed"] = float((greedy - row["total_cost"][0]) / gap)
             out.append(row)
     return out
+
+
+def complete_seeds(doc: dict) -> dict:
+    """The document restricted to seeds finished at every hour, so that hours compare like for like.
+
+    A run cut short (or still going) leaves its last seed at some hours only.
+    """
+    eps = doc["episodes"]
+    hours = {e["hour"] for e in eps}
+    at = {}
+    for e in eps:
+        at.setdefault(e["seed"], set()).add(e["hour"])
+    keep = {s for s, hs in at.items() if hs == hours}
+    return {**doc, "episodes": [e for e in eps if e["seed"] in keep]}
+
+
+def compare(doc: dict, policy: str) -> list[dict]:
+    """``policy`` against every other non-oracle policy, paired instance by instance, per hour.
+
+    ``wins`` counts the instances where ``policy`` has the lower total cost;
+    ``overhead_reduction`` is 1 - its mean wait overhead per served request
+    over the other's, and ``served_change`` its mean served over the other's,
+    minus 1 (the paper's two headline comparisons).  ``below_oracle`` counts
+    instances where ``policy`` beat the oracle, which is a receding-horizon
+    auction, not a proven optimum.
+    """
+    by = {(e["hour"], e["seed"], e["policy"]): e for e in doc["episodes"]}
+    policies = list(dict.fromkeys(e["policy"] for e in doc["episodes"]))
+    if policy not in policies:
+        raise ConfigError(f"policy {policy!r} is not in the results; they hold {', '.join(policies)}")
+    out = []
+    for other in (p for p in policies if p not in (policy, "oracle")):
+        for h in sorted({e["hour"] for e in doc["episodes"]}):
+            pairs = [(by[k], by[(k[0], k[1], other)]) for k in by
+                     if k[0] == h and k[2] == policy and (k[0], k[1], other) in by]
+            if not pairs:
+                continue
+            mine, theirs = (np.array([[a[m] for a in side] for m in METRICS[:4]]) for side in zip(*pairs))
+            out.append({
+                "hour": h,
+                "policy": policy,
+                "against": other,
+                "n": len(pairs),
+                "wins": int((mine[0] < theirs[0]).sum()),
+                "cost_difference": float((mine[0] - theirs[0]).mean()),
+                "overhead_reduction": float(1 - mine[3].mean() / theirs[3].mean()) if theirs[3].mean() > 0 else None,
+                "served_change": float(mine[2].mean() / theirs[2].mean() - 1),
+                "below_oracle": int(sum(a["total_cost"] < a["oracle_cost"] for a, _ in pairs)),
+            })
+    return out
+
+
+def format_comparison(rows: Iterable[dict]) -> str:
+    rows = list(rows)
+    if not rows:
+        return ""
+    width = max([10] + [len(r["against"]) + 2 for r in rows])
+    head = f"{'hour':>4}  {'against':<{width}}{'wins':>10}{'cost diff':>12}{'overhead Δ':>12}{'served Δ':>10}"
+    policy = rows[0]["policy"]
+    lines = [f"{policy} paired with each policy on the same instances (wins: lower total cost)", head, "-" * len(head)]
+    for r in rows:
+        red = f"{-100 * r['overhead_reduction']:>+11.1f}%" if r["overhead_reduction"] is not None else f"{'—':>12}"
+        lines.append(
+            f"{r['hour']:>4}  {r['against']:<{width}}{r['wins']:>5} / {r['n']:<3}"
+            f"{r['cost_difference']:>+11.1f}{red}{100 * r['served_change']:>+9.1f}%"
+        )
+    per_hour = {r["hour"]: r for r in rows}.values()
+    below, n = sum(r["below_oracle"] for r in per_hour), sum(r["n"] for r in per_hour)
+    lines.append(f"{policy} cost less than the oracle (a receding-horizon auction) in {below} of {n} instances")
+    return "\n".join(lines)
 
 
 def format_table(summary: Iterable[dict]) -> str:

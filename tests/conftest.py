@@ -59,3 +59,11 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"{SHARED_DATA} not found")
     return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def synthetic_scenario():  # noqa: ANN201
+    """The embedded synthetic city and its demand world (built once per session)."""
+    from city.scenario import load_scenario
+
+    return load_scenario("synthetic")

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -43,7 +45,7 @@ def test_bad_flag_values_are_rejected_by_argparse(args: list[str]) -> None:
 
 
 def test_every_subcommand_has_help() -> None:
-    for sub in (["evaluate"], ["city"], ["demand"], ["demo"], ["bench", "city"], ["bench", "sim"]):
+    for sub in (["evaluate"], ["city"], ["demand"], ["demo"], ["report"], ["bench", "city"], ["bench", "sim"]):
         proc = run_cli(*sub, "--help")
         assert proc.returncode == 0, proc.stderr
         assert "usage: surge" in proc.stdout
@@ -64,3 +66,62 @@ def test_evaluate_small_run_writes_results_json(tmp_path: Path) -> None:
                        "wait_overhead_per_served", "plan_seconds_per_step", "decisions_sha256"}
     assert "oracle" in proc.stdout and "total cost" in proc.stdout
     assert (tmp_path / "r.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_report_reads_a_results_file(tmp_path: Path) -> None:
+    out = tmp_path / "r.json"
+    assert run_cli("evaluate", "--hours", "19", "--seeds", "2", "--taxis", "20", "--minutes", "10",
+                   "--policies", "greedy", "ia", "--json", str(out)).returncode == 0
+    proc = run_cli("report", str(out), "--policy", "ia", "--json", str(tmp_path / "rep.json"), "--plot", str(tmp_path / "rep.png"))
+    assert proc.returncode == 0, proc.stderr
+    assert "total cost" in proc.stdout and "ia paired with each policy" in proc.stdout
+    rep = json.loads((tmp_path / "rep.json").read_text())
+    assert rep["schema"] == "surge.report/1" and rep["seeds"] == [0, 1]
+    assert [r["against"] for r in rep["comparison"]] == ["greedy"]
+    assert (tmp_path / "rep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    doc = json.loads(out.read_text())
+    doc["episodes"][2].pop("total_cost")
+    out.write_text(json.dumps(doc))
+    proc = run_cli("report", str(out))
+    assert proc.returncode == 2 and proc.stderr.strip() == f"surge: error: {out}: episode 2 has no 'total_cost' field"
+
+
+def _children(pid: int) -> set[int]:
+    kids = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rpartition(")")[2].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            kids.add(int(stat.parent.name))
+    return kids
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the process table from /proc")
+def test_sigterm_stops_the_worker_pool_and_keeps_finished_instances(tmp_path: Path) -> None:
+    out = tmp_path / "r.json"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "coordinator.cli", "evaluate", "--hours", "19", "--seeds", "20", "--taxis", "40",
+         "--minutes", "60", "--policies", "greedy", "ia", "--jobs", "2", "--json", str(out)],
+        stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        line = proc.stderr.readline()
+        while line and not line.startswith("[1/20]"):
+            line = proc.stderr.readline()
+        assert line.startswith("[1/20]"), "the run ended before its first instance"
+        workers = _children(proc.pid)
+        assert workers
+        proc.send_signal(signal.SIGTERM)
+        rest = proc.stderr.read()
+        assert proc.wait(timeout=60) == 128 + signal.SIGTERM
+    finally:
+        proc.kill()
+    assert "surge: terminated" in rest and "Traceback" not in rest
+    deadline = time.monotonic() + 30
+    while any(Path(f"/proc/{w}").exists() for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not [w for w in workers if Path(f"/proc/{w}").exists()], "worker processes outlived the run"
+    done = json.loads(out.read_text())["episodes"]
+    assert 2 <= len(done) < 40 and len(done) % 2 == 0  # whole instances, and not the full run

@@ -5,10 +5,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from city.errors import ConfigError, DataError
-from coordinator.evaluate import EvalConfig, evaluate, parse_policy, summarize
+from coordinator.evaluate import EvalConfig, compare, complete_seeds, evaluate, format_comparison, parse_policy, read_results, summarize
 
 
 @pytest.fixture(scope="module")
@@ -78,3 +79,41 @@ def test_resume_keeps_finished_instances(small_run: dict, tmp_path: Path) -> Non
     other = EvalConfig(hours=[19], seeds=2, taxis=30, minutes=20, policies=["greedy", "ia", "oracle"])
     with pytest.raises(DataError, match="taxis=40"):
         evaluate(other, progress=lambda _msg: None, checkpoint=path, resume=True)
+
+
+def test_complete_seeds_drops_a_seed_missing_an_hour(small_run: dict) -> None:
+    extra = {**small_run["episodes"][0], "hour": 21, "seed": 0}
+    doc = {**small_run, "episodes": small_run["episodes"] + [extra]}
+    assert complete_seeds(doc)["episodes"] == [e for e in doc["episodes"] if e["seed"] == 0]
+    assert complete_seeds(small_run)["episodes"] == small_run["episodes"]
+
+
+def test_compare_pairs_instances(small_run: dict) -> None:
+    rows = compare(small_run, "ia")
+    assert [(r["against"], r["hour"], r["n"]) for r in rows] == [("greedy", 19, 2)]  # never against the oracle
+    ia = [e for e in small_run["episodes"] if e["policy"] == "ia"]
+    greedy = [e for e in small_run["episodes"] if e["policy"] == "greedy"]
+    row = rows[0]
+    assert row["wins"] == sum(a["total_cost"] < b["total_cost"] for a, b in zip(ia, greedy))
+    assert row["cost_difference"] == pytest.approx(np.mean([a["total_cost"] - b["total_cost"] for a, b in zip(ia, greedy)]))
+    over = [np.mean([e["wait_overhead_per_served"] for e in side]) for side in (ia, greedy)]
+    assert row["overhead_reduction"] == pytest.approx(1 - over[0] / over[1])
+    served = [np.mean([e["served"] for e in side]) for side in (ia, greedy)]
+    assert row["served_change"] == pytest.approx(served[0] / served[1] - 1)
+    assert row["below_oracle"] == sum(e["total_cost"] < e["oracle_cost"] for e in ia)
+    text = format_comparison(rows)
+    assert "ia paired with each policy" in text and f"{row['wins']:>5} / 2" in text
+    with pytest.raises(ConfigError, match="'surge' is not in the results"):
+        compare(small_run, "surge")
+
+
+def test_read_results_names_the_broken_episode(small_run: dict, tmp_path: Path) -> None:
+    path = tmp_path / "r.json"
+    doc = json.loads(json.dumps(small_run))
+    del doc["episodes"][1]["served"]
+    path.write_text(json.dumps(doc))
+    with pytest.raises(DataError, match=r"r\.json: episode 1 has no 'served' field"):
+        read_results(path)
+    path.write_text("{")
+    with pytest.raises(DataError, match="not JSON"):
+        read_results(path)

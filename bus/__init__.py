@@ -1,0 +1,1 @@
+"""The wire and the bus: msgpack messages, key expressions and zenoh sessions."""

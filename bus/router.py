@@ -1,0 +1,42 @@
+"""A zenoh router as a process of its own, for runs without a ``zenohd`` at hand."""
+
+from __future__ import annotations
+
+import signal
+import socket
+import threading
+import time
+
+from bus.session import SessionArgs, open_session
+from city.errors import ConfigError
+
+
+def router_main(bus: SessionArgs) -> None:
+    """Open a router session and hold it until SIGTERM or SIGINT."""
+    if bus.mode != "router":
+        raise ConfigError(f"router_main needs mode 'router', got {bus.mode!r}")
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    with open_session(bus):
+        stop.wait()
+
+
+def free_tcp_port() -> int:
+    """A loopback TCP port that was free a moment ago."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_for_tcp(host: str, port: int, timeout: float) -> None:
+    """Block until something listens on ``host:port``; raise :class:`ConfigError` after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with socket.create_connection((host, port), timeout=0.5):
+                return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise ConfigError(f"nothing listens on {host}:{port} after {timeout:.0f} s") from None
+            time.sleep(0.1)

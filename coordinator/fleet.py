@@ -1,0 +1,252 @@
+"""The local multi-process fleet: a router, a coordinator and one process per taxi, on loopback.
+
+Every process is started with the ``spawn`` context of ``multiprocess`` (the
+stdlib API, pickling with dill) and opens its own zenoh session; this
+launcher opens none.  With ``check``, the same instance also runs in-process
+and the two runs' decisions are compared.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocess as mp
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from bus.router import free_tcp_port, router_main, wait_for_tcp
+from bus.session import SessionArgs
+from city.errors import ConfigError, SurgeError
+from coordinator.runtime import FleetConfig
+
+
+def _agent_entry(index: int, run: str, bus: SessionArgs, join_timeout_s: float, data_dir: str | None = None) -> None:
+    from agents.taxi import AgentConfig, agent_main
+
+    sys.exit(agent_main(AgentConfig(index=index, run=run, bus=bus, join_timeout_s=join_timeout_s, data_dir=data_dir)))
+
+
+def _coordinator_entry(cfg: FleetConfig, bus: SessionArgs, result_path: str) -> None:
+    from coordinator.runtime import coordinator_main
+
+    try:
+        coordinator_main(cfg, bus, result_path)
+    except SurgeError as exc:
+        print(f"surge coordinator: error: {exc}", file=sys.stderr, flush=True)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        sys.exit(130)
+
+
+def in_process(cfg: FleetConfig) -> dict:
+    """The same instance under the in-process policy: the reference the distributed run must match."""
+    import datetime as dt
+
+    from agents.base import EpisodeContext
+    from city.scenario import load_scenario
+    from coordinator.evaluate import episode_requests, initial_positions, run_episode
+
+    scen = load_scenario(cfg.scenario, cfg.data_dir, seed=cfg.world_seed)
+    date = dt.date.fromisoformat(cfg.date)
+    context = EpisodeContext(city=scen.city, date=date, hour=cfg.hour, minutes=cfg.minutes, seed=cfg.seed, world=scen.world)
+    res = run_episode(scen.city, cfg.make_policy(scen.city), episode_requests(scen.world, date, cfg.hour, cfg.minutes),
+                      initial_positions(scen.city, cfg.taxis, cfg.seed), context)
+    return {"total_cost": res.total_cost, "served": res.served, "decisions_sha256": res.decisions_sha256}
+
+
+def run_local_fleet(cfg: FleetConfig, *, startup_timeout_s: float = 60.0) -> dict:
+    """Run ``cfg`` as real processes over a loopback router; the coordinator's result."""
+    ctx = mp.get_context("spawn")
+    port = free_tcp_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    client = SessionArgs(mode="client", connect=[endpoint])
+    procs: list = []
+    router = ctx.Process(target=router_main, args=(SessionArgs(mode="router", listen=[endpoint]),), name="surge-router")
+    router.start()
+    procs.append(router)
+    try:
+        wait_for_tcp("127.0.0.1", port, startup_timeout_s)
+        with tempfile.TemporaryDirectory(prefix="surge-fleet-") as tmp:
+            result_path = str(Path(tmp) / "result.json")
+            coord = ctx.Process(target=_coordinator_entry, args=(cfg, client, result_path), name="surge-coordinator")
+            coord.start()
+            procs.append(coord)
+            agents = [ctx.Process(target=_agent_entry, args=(i, cfg.run, client, cfg.join_timeout_s), name=f"surge-agent-{i}")
+                      for i in range(cfg.taxis)]
+            for p in agents:
+                p.start()
+            procs.extend(agents)
+            coord.join()
+            if coord.exitcode != 0:
+                raise ConfigError(f"the coordinator failed (exit code {coord.exitcode}); see its message above")
+            result = json.loads(Path(result_path).read_text())
+            deadline = time.monotonic() + 30
+            for p in agents:
+                p.join(max(0.1, deadline - time.monotonic()))
+            result["agents_exit_codes"] = [p.exitcode for p in agents]
+            return result
+    finally:
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+        for p in procs:
+            p.join(10)
+
+
+# ------------------------------------------------------------------ command line
+def _fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  # noqa: ANN001
+    from coordinator.cli import _date, _hour, _positive, _scenario_args
+
+    p.add_argument("--run", default="demo", help="run name: the key-expression prefix surge/<run>/ (default: demo)")
+    _scenario_args(p)
+    p.add_argument("--date", type=_date, default="2022-11-17")
+    p.add_argument("--hour", type=_hour, default=19, help="episode hour (default: the 7 pm surge)")
+    p.add_argument("--minutes", type=_positive, default=minutes)
+    p.add_argument("--taxis", type=_positive, default=taxis, help="taxis, one agent process each")
+    p.add_argument("--seed", type=int, default=0, help="initial placement seed (as surge evaluate's seeds)")
+    p.add_argument("--world-seed", type=int, default=0)
+    p.add_argument("--policy", default="surge", help="rollout policy: surge or garces2023, with options as in evaluate")
+    p.add_argument("--forecast", default=None, help="forecast provider for surge (true-rate, previous-hour, model)")
+    p.add_argument("--model", default=None, help="trained predictor directory for --forecast model")
+    p.add_argument("--horizon", type=_positive, default=None)
+    p.add_argument("--samples", type=_positive, default=samples)
+    p.add_argument("--deadline", type=float, default=30.0, help="seconds an agent has for its turn before the base control is used")
+    p.add_argument("--join-timeout", type=float, default=120.0, help="seconds to wait for every agent to join")
+    p.add_argument("--minute-seconds", type=float, default=0.0,
+                   help="least wall seconds per simulated minute (default 0: as fast as the agents plan; 60: real time)")
+    p.add_argument("--json", default=None, help="write the run's result here")
+
+
+def fleet_config(args) -> FleetConfig:  # noqa: ANN001
+    from city.scenario import check_scenario
+    from coordinator.cli import rollout_options
+    from coordinator.evaluate import parse_policy
+
+    check_scenario(args.scenario, args.data)
+    name, options = parse_policy(args.policy)
+    if name not in ("surge", "garces2023"):
+        raise ConfigError(f"policy {name!r}: the distributed runtime runs rollout policies (surge, garces2023)")
+    options = {**rollout_options(args, [args.policy]).get(args.policy, {}), **options}
+    if args.deadline <= 0 or args.join_timeout <= 0 or args.minute_seconds < 0:
+        raise ConfigError("--deadline and --join-timeout must be positive, --minute-seconds not negative")
+    return FleetConfig(run=args.run, scenario=args.scenario, data_dir=args.data, date=args.date, hour=args.hour,
+                       minutes=args.minutes, taxis=args.taxis, seed=args.seed, world_seed=args.world_seed, policy=name,
+                       options=options, deadline_s=args.deadline, join_timeout_s=args.join_timeout,
+                       minute_s=args.minute_seconds)
+
+
+def _print_result(result: dict, path: str | None) -> None:
+    print(f"run {result['run']!r}: {result['policy']}, {result['taxis']} taxis, {result['minutes']} min: total cost "
+          f"{result['total_cost']}, served {result['served']} of {result['requests']}, {result['fallbacks']} base-control fallbacks")
+    plan = result["agent_plan_seconds"]["median"]
+    print(f"  minute wall time median {result['step_seconds']['median']:.3f} s, max {result['step_seconds']['max']:.3f} s; "
+          f"agent plan median {plan if plan is None else f'{plan:.3f} s'}; agent peak RSS {result['agent_peak_rss_mb']:.0f} MB")
+    print(f"  decisions sha256 {result['decisions_sha256']}")
+    if path:
+        Path(path).write_text(json.dumps(result, indent=1))
+        print(f"wrote {path}")
+
+
+def cmd_fleet(args) -> int:  # noqa: ANN001
+    cfg = fleet_config(args)
+    print(f"starting a router, a coordinator and {cfg.taxis} agent processes on loopback", file=sys.stderr, flush=True)
+    result = run_local_fleet(cfg)
+    if args.check:
+        print("running the same instance in-process to compare decisions", file=sys.stderr, flush=True)
+        ref = in_process(cfg)
+        result["in_process"] = ref
+        result["same_decisions"] = ref["decisions_sha256"] == result["decisions_sha256"]
+    _print_result(result, args.json)
+    if args.check:
+        print(f"  in-process run of the same seed: total cost {result['in_process']['total_cost']}; "
+              f"decisions {'identical' if result['same_decisions'] else 'DIFFERENT'}")
+        return 0 if result["same_decisions"] or result["fallbacks"] else 1
+    return 0
+
+
+def cmd_router(args) -> int:  # noqa: ANN001
+    from bus.session import session_args
+
+    bus = session_args(args)
+    where = ", ".join(bus.listen) or f"the endpoints of {bus.config}"
+    print(f"zenoh router listening on {where}; Ctrl-C stops it", file=sys.stderr, flush=True)
+    router_main(bus)
+    return 0
+
+
+def cmd_coordinator(args) -> int:  # noqa: ANN001
+    from bus.session import session_args
+    from coordinator.runtime import coordinator_main
+
+    result = coordinator_main(fleet_config(args), session_args(args))
+    _print_result(result, args.json)
+    return 0
+
+
+def parse_ids(text: str) -> list[int]:
+    """``"0-3,7"`` -> ``[0, 1, 2, 3, 7]``."""
+    out: list[int] = []
+    for part in filter(None, text.split(",")):
+        lo, dash, hi = part.partition("-")
+        try:
+            a, b = int(lo), int(hi) if dash else int(lo)
+        except ValueError:
+            raise ConfigError(f"--ids {text!r}: {part!r} is not N or N-M") from None
+        if a < 0 or b < a:
+            raise ConfigError(f"--ids {text!r}: {part!r} is not an ascending range of non-negative ids")
+        out.extend(range(a, b + 1))
+    if not out:
+        raise ConfigError(f"--ids {text!r}: no agent ids")
+    return sorted(set(out))
+
+
+def cmd_agents(args) -> int:  # noqa: ANN001
+    from bus.session import session_args
+
+    bus = session_args(args)
+    ids = parse_ids(args.ids)
+    ctx = mp.get_context("spawn")
+    procs = [ctx.Process(target=_agent_entry, args=(i, args.run, bus, args.join_timeout, args.data), name=f"surge-agent-{i}")
+             for i in ids]
+    print(f"starting {len(procs)} agent processes for run {args.run!r}", file=sys.stderr, flush=True)
+    for p in procs:
+        p.start()
+    try:
+        for p in procs:
+            p.join()
+    finally:
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+    failed = [i for i, p in zip(ids, procs) if p.exitcode != 0]
+    if failed:
+        print(f"surge: agents {', '.join(map(str, failed))} exited with an error", file=sys.stderr)
+        return 1
+    return 0
+
+
+def add_parsers(sub) -> None:  # noqa: ANN001
+    from bus.session import add_session_args
+
+    p = sub.add_parser("fleet", help="the local multi-process fleet: router, coordinator and one process per taxi on loopback")
+    _fleet_args(p, taxis=8, minutes=20, samples=None)
+    p.add_argument("--check", action="store_true", help="also run the instance in-process and compare the decisions")
+    p.set_defaults(func=cmd_fleet)
+
+    r = sub.add_parser("router", help="a zenoh router for runs across machines")
+    add_session_args(r, mode="router")
+    r.set_defaults(func=cmd_router)
+
+    c = sub.add_parser("coordinator", help="the clock and world of a distributed run; agents join it over zenoh")
+    add_session_args(c)
+    _fleet_args(c, taxis=8, minutes=60, samples=None)
+    c.set_defaults(func=cmd_coordinator)
+
+    a = sub.add_parser("agents", help="start agent processes (one per taxi) that join a run over zenoh")
+    add_session_args(a)
+    a.add_argument("--run", default="demo", help="run name (as the coordinator's --run)")
+    a.add_argument("--ids", required=True, help="taxi indices to run here, e.g. 0-49 or 0-3,8")
+    a.add_argument("--join-timeout", type=float, default=120.0, help="seconds to wait for the coordinator")
+    a.add_argument("--data", default=None, help="this host's copy of the data directory, if not at the coordinator's path")
+    a.set_defaults(func=cmd_agents)

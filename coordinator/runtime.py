@@ -1,0 +1,260 @@
+"""The coordinator of a distributed run: the clock, the ground-truth world and the order of turns.
+
+Each minute it publishes the state (a delta) and, at each hour, the forecast;
+then it gives the free taxis their turns one at a time, in agent order, and
+commits each control it receives so that the agents after it can see it.  A
+silent agent (its liveliness token gone, or past the deadline) gets the base
+policy's control for that minute, which is what the in-process rollout
+assumes for the agents after the decider, and the run goes on.  A restarted
+agent rejoins from a snapshot.  With every agent answering, the decisions are
+those of the in-process policy of the same seed, bit for bit
+(``tests/test_runtime.py``).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from agents.base import EpisodeContext, make_policy
+from agents.rollout import RolloutPolicy, base_controls, candidate_controls
+from bus.delta import state_message
+from bus.keys import Keys
+from bus.session import Inbox, SessionArgs, open_session, publisher
+from bus.wire import Control, ForecastMsg, RunSpec, Snapshot, Stop, Turn, WireError, decode
+from city.errors import ConfigError
+from city.sim import FleetSim, decisions_hash
+
+
+@dataclass(frozen=True)
+class FleetConfig:
+    """One distributed episode: the same instance as ``surge evaluate``'s (date, hour, seed)."""
+
+    run: str = "demo"
+    scenario: str = "synthetic"
+    data_dir: str | None = None
+    date: str = "2022-11-17"
+    hour: int = 19
+    minutes: int = 60
+    taxis: int = 8
+    seed: int = 0
+    world_seed: int = 0
+    policy: str = "surge"
+    options: dict = field(default_factory=dict)
+    deadline_s: float = 30.0
+    join_timeout_s: float = 120.0
+    #: Least wall time per simulated minute: 0 runs as fast as the agents plan, 60 in real time.
+    minute_s: float = 0.0
+
+    def make_policy(self, city) -> RolloutPolicy:  # noqa: ANN001
+        policy = make_policy(self.policy, city, **self.options)
+        if not isinstance(policy, RolloutPolicy):
+            raise ConfigError(f"policy {self.policy!r}: the distributed runtime runs rollout policies (surge, garces2023)")
+        return policy
+
+
+def log(message: str) -> None:
+    print(f"surge coordinator: {message}", file=sys.stderr, flush=True)
+
+
+class Coordinator:
+    """Runs one episode over the bus; :meth:`run` returns its metrics and decisions."""
+
+    def __init__(self, config: FleetConfig, progress: bool = True) -> None:
+        from city.scenario import load_scenario
+        from coordinator.evaluate import episode_requests, initial_positions
+
+        self.cfg = config
+        self.keys = Keys(config.run)
+        self.progress = progress
+        scen = load_scenario(config.scenario, config.data_dir, seed=config.world_seed)
+        self.city = scen.city
+        date = dt.date.fromisoformat(config.date)
+        self.policy = config.make_policy(self.city)
+        self.policy.reset(EpisodeContext(city=self.city, date=date, hour=config.hour, minutes=config.minutes,
+                                         seed=config.seed, world=scen.world))
+        self.sim = FleetSim(self.city, episode_requests(scen.world, date, config.hour, config.minutes),
+                            initial_positions(self.city, config.taxis, config.seed))
+        self.spec = RunSpec(run=config.run, scenario=config.scenario, data_dir=config.data_dir, city=self.city.summary(), taxis=config.taxis,
+                            minutes=config.minutes, policy=config.policy, rollout=asdict(self.policy.config),
+                            deadline_s=config.deadline_s)
+        self.alive: set[int] = set()
+        self.forecast_msg = b""
+        self.state_msg = b""
+        self.stale = 0
+
+    # ------------------------------------------------------------------ inbox
+    def _handle(self, item: tuple[str, str, object], want: tuple[int, int] | None = None) -> Control | None:
+        """Serve queries, track liveliness, and return the control ``want`` = (t, agent) if this item is it."""
+        tag, key, payload = item
+        if tag == "alive":
+            agent = Keys.agent_of(key)
+            if agent is not None and 0 <= agent < self.cfg.taxis:
+                if payload:
+                    self.alive.add(agent)
+                else:
+                    self.alive.discard(agent)
+                    log(f"agent {agent} left")
+        elif tag == "spec":
+            payload.reply(self.keys.spec, self.spec.encode())  # type: ignore[attr-defined]
+        elif tag == "snapshot":
+            snap = Snapshot(state=self.full_state(), forecast=self.forecast_msg)
+            payload.reply(self.keys.snapshot, snap.encode())  # type: ignore[attr-defined]
+        elif tag == "control":
+            try:
+                c = decode(payload, Control, key)  # type: ignore[arg-type]
+            except WireError as exc:
+                log(f"ignored: {exc}")
+                return None
+            if Keys.agent_of(key) != c.agent:  # type: ignore[attr-defined]
+                log(f"ignored: {key}: control of agent {c.agent} on another agent's key")  # type: ignore[attr-defined]
+            elif want is not None and (c.t, c.agent) == want:  # type: ignore[attr-defined]
+                return c  # type: ignore[return-value]
+            else:
+                self.stale += 1
+        return None
+
+    def full_state(self) -> bytes:
+        return state_message(self.sim.observe(), None).encode()
+
+    # ------------------------------------------------------------------- run
+    def run(self, bus: SessionArgs) -> dict:
+        with open_session(bus) as session:
+            inbox = Inbox()
+            decls = [
+                inbox.serve(session, self.keys.spec, "spec"),
+                inbox.serve(session, self.keys.snapshot, "snapshot"),
+                inbox.subscribe(session, self.keys.all_controls, "control"),
+                inbox.watch_liveliness(session, self.keys.all_alive, "alive"),
+            ]
+            try:
+                return self._run(session, inbox)
+            finally:
+                for d in decls:
+                    d.undeclare()
+
+    def _wait_for_agents(self, inbox: Inbox) -> None:
+        deadline = time.monotonic() + self.cfg.join_timeout_s
+        while len(self.alive) < self.cfg.taxis:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                missing = sorted(set(range(self.cfg.taxis)) - self.alive)
+                raise ConfigError(f"run {self.cfg.run!r}: {len(self.alive)} of {self.cfg.taxis} agents joined within "
+                                  f"{self.cfg.join_timeout_s:.0f} s; missing {', '.join(map(str, missing[:10]))}")
+            item = inbox.get(timeout=min(left, 1.0))
+            if item is not None:
+                self._handle(item)
+        log(f"all {self.cfg.taxis} agents joined run {self.cfg.run!r}")
+
+    def _run(self, session, inbox: Inbox) -> dict:  # noqa: ANN001
+        cfg, keys = self.cfg, self.keys
+        pub_state, pub_forecast, pub_stop = (publisher(session, k) for k in (keys.state, keys.forecast, keys.stop))
+        turn_pub = {a: publisher(session, keys.turn(a)) for a in range(cfg.taxis)}
+        commit_pub = {a: publisher(session, keys.committed(a)) for a in range(cfg.taxis)}
+        self._wait_for_agents(inbox)
+        controls = np.zeros((cfg.minutes, cfg.taxis), dtype=np.int32)
+        costs, step_s, plan_s = [], [], []
+        planned = np.zeros(cfg.taxis, dtype=np.int64)
+        fallbacks = np.zeros(cfg.taxis, dtype=np.int64)
+        rss = np.zeros(cfg.taxis)
+        previous = None
+        t_start = time.perf_counter()
+        for t in range(cfg.minutes):
+            t0 = time.perf_counter()
+            obs = self.sim.observe()
+            if t % 60 == 0:
+                fc = self.policy.forecast(t // 60)
+                self.forecast_msg = ForecastMsg(hour=t // 60, eta=fc.eta, rho=fc.rho, delta=fc.delta, beta=fc.beta).encode()
+                pub_forecast.put(self.forecast_msg)
+            pub_state.put(state_message(obs, previous).encode())
+            previous = np.asarray(obs.req_index)
+            base = base_controls(self.city, self.policy.config, obs)
+            u = base.copy()
+            for agent in np.flatnonzero(obs.tau == 0).tolist():
+                got = self._turn(inbox, turn_pub[agent], t, agent)
+                if got is not None and got.control not in candidate_controls(self.city, obs, agent):
+                    log(f"minute {t}: agent {agent} proposed {got.control}, not one of its controls; base control used")
+                    got = None
+                if got is None:
+                    fallbacks[agent] += 1
+                    u[agent] = base[agent]
+                    commit = Control(t=t, agent=agent, control=int(base[agent]), by="base")
+                else:
+                    u[agent] = got.control
+                    planned[agent] += 1
+                    plan_s.append(got.plan_s)
+                    rss[agent] = max(rss[agent], got.rss_mb)
+                    commit = got
+                commit_pub[agent].put(commit.encode())
+            controls[t] = u
+            costs.append(self.sim.step(u))
+            step_s.append(time.perf_counter() - t0)
+            if self.progress:
+                free = int((obs.tau == 0).sum())
+                log(f"minute {t + 1}/{cfg.minutes}: {free} free {'taxi' if free == 1 else 'taxis'} took turns, "
+                    f"{costs[-1]} requests waiting ({step_s[-1]:.2f} s)")
+            self._pace(inbox, t0 + cfg.minute_s)
+        pub_stop.put(Stop(t=cfg.minutes).encode())
+        res = self.sim.result(costs, controls, step_s)
+        return {
+            "run": cfg.run,
+            "policy": cfg.policy,
+            "taxis": cfg.taxis,
+            "minutes": cfg.minutes,
+            "total_cost": res.total_cost,
+            "outstanding_end": res.outstanding_end,
+            "served": res.served,
+            "requests": res.n_requests,
+            "decisions_sha256": decisions_hash(controls),
+            "fallbacks": int(fallbacks.sum()),
+            "planned_per_agent": planned.tolist(),
+            "fallbacks_per_agent": fallbacks.tolist(),
+            "controls": controls.tolist(),
+            "stale_messages": self.stale,
+            "step_seconds": {"median": float(np.median(step_s)), "max": float(np.max(step_s))},
+            "agent_plan_seconds": {"median": float(np.median(plan_s)) if plan_s else None,
+                                   "max": float(np.max(plan_s)) if plan_s else None},
+            "agent_peak_rss_mb": float(rss.max()),
+            "wall_seconds": time.perf_counter() - t_start,
+        }
+
+    def _pace(self, inbox: Inbox, until: float) -> None:
+        """Wait out the rest of the minute, still serving joins and snapshots."""
+        while (left := until - time.perf_counter()) > 0:
+            item = inbox.get(timeout=left)
+            if item is not None:
+                self._handle(item)
+
+    def _turn(self, inbox: Inbox, pub, t: int, agent: int) -> Control | None:  # noqa: ANN001
+        """Give ``agent`` its turn and wait for its control until the deadline or its departure."""
+        if agent not in self.alive:
+            return None
+        pub.put(Turn(t=t, agent=agent).encode())
+        deadline = time.monotonic() + self.cfg.deadline_s
+        while agent in self.alive:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                log(f"minute {t}: agent {agent} silent for {self.cfg.deadline_s:g} s; base control used")
+                return None
+            item = inbox.get(timeout=left)
+            if item is not None:
+                got = self._handle(item, want=(t, agent))
+                if got is not None:
+                    return got
+        log(f"minute {t}: agent {agent} is gone; base control used")
+        return None
+
+
+def coordinator_main(config: FleetConfig, bus: SessionArgs, result_path: str | None = None) -> dict:
+    """Run the coordinator; with ``result_path``, write the result there as JSON (for a launcher)."""
+    import json
+    from pathlib import Path
+
+    result = Coordinator(config).run(bus)
+    if result_path is not None:
+        Path(result_path).write_text(json.dumps(result, indent=1))
+    return result

@@ -1,0 +1,123 @@
+"""The wire format, state deltas, key expressions and session settings (no bus needed)."""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+
+import msgpack
+import numpy as np
+import pytest
+
+from agents.greedy import greedy_controls
+from bus.delta import StateView, state_message
+from bus.keys import Keys
+from bus.session import DEFAULT_ENDPOINT, SessionArgs, add_session_args, session_args
+from bus.wire import Control, ForecastMsg, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
+from city.errors import ConfigError
+from city.sim import FleetSim
+from coordinator.evaluate import episode_requests, initial_positions
+from coordinator.fleet import parse_ids
+
+
+def test_every_message_round_trips_exactly() -> None:
+    rng = np.random.default_rng(0)
+    fc = ForecastMsg(hour=1, eta=rng.random(5), rho=rng.random(40), delta=rng.random(40), beta=rng.random((5, 5)))
+    back = decode(fc.encode(), ForecastMsg)
+    for name in ("eta", "rho", "delta", "beta"):
+        assert np.array_equal(getattr(back, name), getattr(fc, name)) and getattr(back, name).dtype == np.float64
+    assert back.beta.shape == (5, 5) and back.hour == 1
+    spec = RunSpec(run="r", scenario="synthetic", data_dir=None, city={"intersections": 9}, taxis=3, minutes=5, policy="surge",
+                   rollout={"horizon": 4, "samples": 10}, deadline_s=2.5)
+    assert decode(spec.encode(), RunSpec) == spec
+    for msg in (Turn(t=3, agent=2), Control(t=3, agent=2, control=-1, by="base", plan_s=0.25), Stop(t=9)):
+        assert decode(msg.encode(), type(msg)) == msg
+    snap = Snapshot(state=b"abc", forecast=fc.encode())
+    assert decode(snap.encode(), (Turn, Snapshot)) == snap
+
+
+@pytest.mark.parametrize(
+    ("payload", "message"),
+    [
+        (b"\xc1", "not msgpack"),
+        (msgpack.packb([1, 2]), "expected a map"),
+        (msgpack.packb({"v": 99, "kind": "turn", "t": 1, "agent": 0}), "wire version 99"),
+        (msgpack.packb({"v": 1, "kind": "stop", "t": 1}), "kind 'stop', expected turn"),
+        (msgpack.packb({"v": 1, "kind": "turn", "t": 1}), "turn has no field 'agent'"),
+        (msgpack.packb({"v": 1, "kind": "turn", "t": "1", "agent": 0}), "field 't' is str, expected int"),
+        (msgpack.packb({"v": 1, "kind": "turn", "t": True, "agent": 0}), "field 't' is bool, expected int"),
+    ],
+)
+def test_bad_messages_name_the_key_and_field(payload: bytes, message: str) -> None:
+    with pytest.raises(WireError) as err:
+        decode(payload, Turn, "surge/x/turn/0")
+    assert str(err.value).startswith("surge/x/turn/0: ") and message in str(err.value)
+
+
+def test_bad_arrays_are_caught() -> None:
+    good = State(t=0, full=True, pos=[1, 2], tau=[0, 0], dest=[-1, -1], new_index=[], new_pickup=[], new_dropoff=[],
+                 new_entry=[], picked=[], outstanding=0)
+    raw = msgpack.unpackb(good.encode())
+    raw["pos"] = b"\x00\x00\x00"
+    with pytest.raises(WireError, match="field 'pos': expected int32 bytes"):
+        decode(msgpack.packb(raw), State, "k")
+    raw["pos"] = np.array([1], dtype="<i4").tobytes()
+    with pytest.raises(WireError, match="one entry per taxi"):
+        decode(msgpack.packb(raw), State, "k")
+    fc = msgpack.unpackb(ForecastMsg(hour=0, eta=np.ones(3), rho=np.ones(4), delta=np.ones(4), beta=np.ones((3, 3))).encode())
+    fc["beta"]["shape"] = [3, 4]
+    with pytest.raises(WireError, match=r"field 'beta': shape \[3, 4\] does not match 72 bytes"):
+        decode(msgpack.packb(fc), ForecastMsg, "k")
+
+
+def test_state_deltas_rebuild_every_observation(synthetic_scenario) -> None:  # noqa: ANN001
+    import datetime as dt
+
+    city, world = synthetic_scenario.city, synthetic_scenario.world
+    sim = FleetSim(city, episode_requests(world, dt.date(2022, 11, 17), 19, 15), initial_positions(city, 20, 0))
+    view, previous, sizes = StateView(), None, []
+    for _ in range(15):
+        obs = sim.observe()
+        msg = decode(state_message(obs, previous).encode(), State)
+        assert view.apply(msg)
+        for name in ("pos", "tau", "dest", "req_index", "req_pickup", "req_dropoff", "req_entry"):
+            assert np.array_equal(getattr(view.obs, name), getattr(obs, name)), name
+        sizes.append(len(msg.new_index))
+        previous = obs.req_index
+        sim.step(greedy_controls(city, obs))
+    assert sum(sizes[1:]) < 15 * len(obs.req_index)  # deltas, not the whole list every minute
+    gap = state_message(sim.observe(), None)
+    later = StateView()
+    assert not later.apply(decode(state_message(sim.observe(), previous).encode(), State))  # a delta needs a base
+    assert later.apply(gap) and later.obs.t == sim.observe().t
+
+
+def test_keys_and_ids() -> None:
+    k = Keys("run-1")
+    assert k.turn(3) == "surge/run-1/turn/3" and Keys.agent_of(k.control(12)) == 12 and Keys.agent_of(k.state) is None
+    with pytest.raises(ConfigError, match="run name 'a/b'"):
+        Keys("a/b")
+    assert parse_ids("0-3,7,2") == [0, 1, 2, 3, 7]
+    with pytest.raises(ConfigError, match="'x' is not N or N-M"):
+        parse_ids("1,x")
+
+
+def test_session_settings() -> None:
+    p = argparse.ArgumentParser()
+    add_session_args(p)
+    assert session_args(p.parse_args([])).connect == [DEFAULT_ENDPOINT]
+    args = session_args(p.parse_args(["--mode", "peer", "-l", "tcp/127.0.0.1:7000"]))
+    assert args.mode == "peer" and args.listen == ["tcp/127.0.0.1:7000"] and args.connect == []
+    conf = args.zenoh_config()
+    assert '"peer"' in conf.get_json("mode") and conf.get_json("scouting/multicast/enabled") == "false"
+    with pytest.raises(ConfigError, match="endpoint '7447'"):
+        SessionArgs(connect=["7447"])
+    with pytest.raises(ConfigError, match="zenoh config /nonexistent.json5: no such file"):
+        SessionArgs(config="/nonexistent.json5").zenoh_config()
+
+
+def test_agent_processes_do_not_import_torch() -> None:
+    code = "import sys, agents.taxi, city.scenario, bus.router; print(sorted(m for m in ('torch', 'sentence_transformers') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

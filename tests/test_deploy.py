@@ -1,0 +1,70 @@
+"""A run across network hosts: router and coordinator on one Linux network namespace, agents on another.
+
+Needs root (or CAP_NET_ADMIN) and iproute2; skipped where the namespaces
+cannot be made.  ``deploy/netns.sh`` builds the two hosts, as a user would.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+
+from coordinator.fleet import in_process
+from coordinator.runtime import FleetConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+NETNS = ROOT / "deploy" / "netns.sh"
+
+
+@pytest.fixture(scope="module")
+def hosts() -> Iterator[str]:
+    if shutil.which("ip") is None or os.geteuid() != 0:
+        pytest.skip("needs root and iproute2 for network namespaces")
+    prefix = f"sg{os.getpid() % 100000}"
+    up = subprocess.run(["bash", str(NETNS), "up", prefix], capture_output=True, text=True)
+    if up.returncode != 0:
+        subprocess.run(["bash", str(NETNS), "down", prefix], capture_output=True)
+        pytest.skip(f"cannot make network namespaces here: {up.stderr.strip()[:200]}")
+    try:
+        yield prefix
+    finally:
+        subprocess.run(["bash", str(NETNS), "down", prefix], capture_output=True)
+
+
+def on(host: str, *cmd: str) -> list[str]:
+    return ["ip", "netns", "exec", host, sys.executable, "-m", "coordinator.cli", *cmd]
+
+
+def test_agents_on_another_host_make_the_in_process_decisions(hosts: str, tmp_path: Path) -> None:
+    h1, h2, endpoint = f"{hosts}-h1", f"{hosts}-h2", "tcp/10.77.0.1:7447"
+    out = tmp_path / "result.json"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    router = subprocess.Popen(on(h1, "router", "--listen", endpoint), stderr=subprocess.PIPE, text=True, env=env)
+    procs = [router]
+    try:
+        wait = [sys.executable, "-c", "from bus.router import wait_for_tcp; wait_for_tcp('10.77.0.1', 7447, 30)"]
+        subprocess.run(["ip", "netns", "exec", h2, *wait], check=True, env=env, timeout=60)
+        coord = subprocess.Popen(on(h1, "coordinator", "--connect", endpoint, "--run", "hosts", "--taxis", "2", "--minutes", "6",
+                                    "--forecast", "true-rate", "--samples", "50", "--json", str(out)),
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        agents = subprocess.Popen(on(h2, "agents", "--connect", endpoint, "--run", "hosts", "--ids", "0-1"),
+                                  stderr=subprocess.PIPE, text=True, env=env)
+        procs += [coord, agents]
+        _, err = coord.communicate(timeout=240)
+        assert coord.returncode == 0, err
+        assert agents.wait(60) == 0
+    finally:
+        for p in procs:
+            p.terminate()
+            p.wait(10)
+    result = json.loads(out.read_text())
+    ref = in_process(FleetConfig(taxis=2, minutes=6, options={"forecast": "true-rate", "samples": 50}))
+    assert result["fallbacks"] == 0 and sum(result["planned_per_agent"]) > 0
+    assert result["decisions_sha256"] == ref["decisions_sha256"]

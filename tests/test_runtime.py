@@ -1,0 +1,112 @@
+"""The distributed runtime over a real zenoh router on loopback, with one process per taxi.
+
+Small fleets and few samples keep these fast; the processes, sessions,
+router and msgpack messages are the real ones.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+
+from bus.router import free_tcp_port, wait_for_tcp
+from coordinator.fleet import in_process, run_local_fleet
+from coordinator.runtime import FleetConfig
+
+CLI = [sys.executable, "-m", "coordinator.cli"]
+
+
+@pytest.mark.parametrize(
+    ("policy", "options"),
+    [("surge", {"forecast": "true-rate", "samples": 100}), ("garces2023", {"samples": 50, "horizon": 5})],
+)
+def test_distributed_run_makes_the_in_process_decisions(policy: str, options: dict) -> None:
+    cfg = FleetConfig(run=f"same-{policy}", taxis=3, minutes=8, policy=policy, options=options, deadline_s=60)
+    dist = run_local_fleet(cfg)
+    ref = in_process(cfg)
+    assert dist["fallbacks"] == 0 and dist["agents_exit_codes"] == [0, 0, 0]
+    assert sum(dist["planned_per_agent"]) > 0
+    assert dist["decisions_sha256"] == ref["decisions_sha256"]
+    assert dist["total_cost"] == ref["total_cost"] and dist["served"] == ref["served"]
+
+
+@pytest.fixture(scope="module")
+def router() -> Iterator[str]:
+    port = free_tcp_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    proc = subprocess.Popen([*CLI, "router", "--listen", endpoint], stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for_tcp("127.0.0.1", port, 30)
+        yield endpoint
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+IMPOSTOR = """
+import sys, time, zenoh
+from bus.keys import Keys
+from bus.session import SessionArgs, open_session
+from bus.wire import Control
+keys, deadline = Keys(sys.argv[1]), float(sys.argv[3])
+with open_session(SessionArgs(mode="client", connect=[sys.argv[2]])) as s:
+    turns = s.declare_subscriber(keys.turn(1), zenoh.handlers.FifoChannel(16))
+    token = s.liveliness().declare_token(keys.alive(1))
+    turns.recv()
+    s.put(keys.control(1), b"not msgpack at all")
+    s.put(keys.control(1), Control(t=0, agent=0, control=0).encode())
+    time.sleep(deadline + 0.5)
+    token.undeclare()
+"""
+
+
+def test_silent_agent_gets_base_controls_bad_messages_are_ignored_and_a_restarted_agent_rejoins(router: str, tmp_path: Path) -> None:
+    run, out, deadline = "rejoin", tmp_path / "result.json", 2.0
+    coord = subprocess.Popen(
+        [*CLI, "coordinator", "--connect", router, "--run", run, "--taxis", "3", "--minutes", "30", "--forecast", "true-rate",
+         "--samples", "50", "--deadline", str(deadline), "--minute-seconds", "0.5", "--join-timeout", "60", "--json", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    others = subprocess.Popen([*CLI, "agents", "--connect", router, "--run", run, "--ids", "0,2"], stderr=subprocess.PIPE, text=True)
+    impostor = subprocess.run([sys.executable, "-c", IMPOSTOR, run, router, str(deadline)], capture_output=True, text=True, timeout=120)
+    assert impostor.returncode == 0, impostor.stderr
+    restarted = subprocess.Popen([*CLI, "agents", "--connect", router, "--run", run, "--ids", "1"], stderr=subprocess.PIPE, text=True)
+    try:
+        _, err = coord.communicate(timeout=180)
+        assert coord.returncode == 0, err
+        assert others.wait(60) == 0 and restarted.wait(60) == 0
+    finally:
+        for p in (coord, others, restarted):
+            p.kill()
+    result = json.loads(out.read_text())
+    assert "ignored: surge/rejoin/control/1: not msgpack" in err
+    assert "ignored: surge/rejoin/control/1: control of agent 0 on another agent's key" in err
+    assert f"agent 1 silent for {deadline:g} s; base control used" in err and "agent 1 left" in err
+    assert result["fallbacks_per_agent"][0] == 0 and result["fallbacks_per_agent"][2] == 0
+    assert result["fallbacks_per_agent"][1] >= 1
+    assert result["planned_per_agent"][1] >= 1, "the restarted agent never took a turn"
+    assert len(result["controls"]) == 30
+
+
+def test_coordinator_without_agents_fails_in_one_line(router: str) -> None:
+    proc = subprocess.run([*CLI, "coordinator", "--connect", router, "--run", "lonely", "--taxis", "2", "--forecast", "true-rate",
+                           "--join-timeout", "1"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines()[-1] == "surge: error: run 'lonely': 0 of 2 agents joined within 1 s; missing 0, 1"
+
+
+def test_fleet_command_checks_against_in_process(tmp_path: Path) -> None:
+    out = tmp_path / "fleet.json"
+    t0 = time.monotonic()
+    proc = subprocess.run([*CLI, "fleet", "--taxis", "2", "--minutes", "5", "--forecast", "true-rate", "--samples", "50", "--check",
+                           "--json", str(out)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "decisions identical" in proc.stdout and "minute 5/5" in proc.stderr
+    doc = json.loads(out.read_text())
+    assert doc["same_decisions"] and doc["wall_seconds"] < time.monotonic() - t0
