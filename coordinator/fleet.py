@@ -15,6 +15,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from bus.router import free_tcp_port, router_main, wait_for_tcp
 from bus.session import SessionArgs
 from city.errors import ConfigError, SurgeError
@@ -52,7 +54,8 @@ def in_process(cfg: FleetConfig) -> dict:
     context = EpisodeContext(city=scen.city, date=date, hour=cfg.hour, minutes=cfg.minutes, seed=cfg.seed, world=scen.world)
     res = run_episode(scen.city, cfg.make_policy(scen.city), episode_requests(scen.world, date, cfg.hour, cfg.minutes),
                       initial_positions(scen.city, cfg.taxis, cfg.seed), context)
-    return {"total_cost": res.total_cost, "served": res.served, "decisions_sha256": res.decisions_sha256}
+    return {"total_cost": res.total_cost, "served": res.served, "decisions_sha256": res.decisions_sha256,
+            "step_seconds": {"median": float(np.median(res.plan_seconds)), "max": float(np.max(res.plan_seconds))}}
 
 
 def run_local_fleet(cfg: FleetConfig, *, startup_timeout_s: float = 60.0) -> dict:
@@ -159,8 +162,9 @@ def cmd_fleet(args) -> int:  # noqa: ANN001
         result["same_decisions"] = ref["decisions_sha256"] == result["decisions_sha256"]
     _print_result(result, args.json)
     if args.check:
-        print(f"  in-process run of the same seed: total cost {result['in_process']['total_cost']}; "
-              f"decisions {'identical' if result['same_decisions'] else 'DIFFERENT'}")
+        ref = result["in_process"]
+        print(f"  in-process run of the same seed: total cost {ref['total_cost']}, planning median "
+              f"{ref['step_seconds']['median']:.3f} s a minute; decisions {'identical' if result['same_decisions'] else 'DIFFERENT'}")
         return 0 if result["same_decisions"] or result["fallbacks"] else 1
     return 0
 
