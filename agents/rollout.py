@@ -56,7 +56,7 @@ unpruned decisions on seeded states.
 from __future__ import annotations
 
 import datetime as dt
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -345,6 +345,28 @@ def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int) -> int:
         return int(ctx.base_controls[agent])
     cands, costs = agent_costs(ctx, committed, agent)
     return choose(cands, costs)
+
+
+def warm_up(city: City | None = None, config: RolloutConfig | None = None) -> None:
+    """Plan once on a made-up minute with two samples: loads the compiled kernels, or compiles them on a fresh checkout.
+
+    Launchers call it before spawning agents, so that numba compiles once into
+    its on-disk cache instead of in every agent at the same time.  Any city
+    serves (the embedded synthetic one by default): the kernels depend on
+    types, not on the map.
+    """
+    if city is None:
+        from city.scenario import load_city
+
+        city = load_city("synthetic")
+    config = config or RolloutConfig()
+    S, n = city.n_sectors, city.n_nodes
+    nodes = np.flatnonzero(city.pickup)[:2].astype(np.int32)
+    fc = Forecast(eta=np.full(S, 0.5), rho=np.ones(n), delta=np.ones(n), beta=np.ones((S, S)))
+    cfg = replace(config, samples=2)
+    obs = Observation(t=0, pos=nodes[:1], tau=np.zeros(1, np.int32), dest=np.full(1, -1, np.int32), req_index=np.zeros(1, np.int64),
+                      req_pickup=nodes[:1], req_dropoff=nodes[-1:], req_entry=np.zeros(1, np.int32))
+    plan_agent(prepare_step(city, cfg, obs, DemandTables.build(city, fc, cfg.ce, cfg.seed), 0), np.empty(0, np.int32), 0)
 
 
 class RolloutPolicy(Policy):

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.forecast import Forecast
-from agents.rollout import DemandTables, RolloutConfig, StepContext, plan_agent, prepare_step
+from agents.rollout import DemandTables, RolloutConfig, StepContext, plan_agent, prepare_step, warm_up
 from bus.delta import StateView
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
@@ -78,6 +78,7 @@ class TaxiAgent:
             if spec.taxis <= self.me:
                 raise ConfigError(f"agent {self.me}: run {spec.run!r} has only {spec.taxis} taxis")
             self.rollout = RolloutConfig(**spec.rollout)
+            self._warm_up()
             out = publisher(session, self.keys.control(self.me))
             token = session.liveliness().declare_token(self.keys.alive(self.me))
             log(self.me, f"joined run {spec.run!r} ({spec.policy}, {spec.taxis} taxis)")
@@ -88,6 +89,10 @@ class TaxiAgent:
                 for s in subs:
                     s.undeclare()
         return self.decisions
+
+    def _warm_up(self) -> None:
+        """Load (or build) the compiled kernels before joining, so that a fresh checkout's first turn is not late."""
+        warm_up(self.city, self.rollout)
 
     def _fetch_spec(self, session) -> RunSpec:  # noqa: ANN001
         deadline = time.monotonic() + self.cfg.join_timeout_s

@@ -60,6 +60,9 @@ def in_process(cfg: FleetConfig) -> dict:
 
 def run_local_fleet(cfg: FleetConfig, *, startup_timeout_s: float = 60.0) -> dict:
     """Run ``cfg`` as real processes over a loopback router; the coordinator's result."""
+    from agents.rollout import warm_up
+
+    warm_up()  # compile once here, not in every agent at once
     ctx = mp.get_context("spawn")
     port = free_tcp_port()
     endpoint = f"tcp/127.0.0.1:{port}"
@@ -210,6 +213,9 @@ def cmd_agents(args) -> int:  # noqa: ANN001
 
     bus = session_args(args)
     ids = parse_ids(args.ids)
+    from agents.rollout import warm_up
+
+    warm_up()  # compile once here, not in every agent at once
     ctx = mp.get_context("spawn")
     procs = [ctx.Process(target=_agent_entry, args=(i, args.run, bus, args.join_timeout, args.data), name=f"surge-agent-{i}")
              for i in ids]

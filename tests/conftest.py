@@ -67,3 +67,14 @@ def synthetic_scenario():  # noqa: ANN201
     from city.scenario import load_scenario
 
     return load_scenario("synthetic")
+
+
+@pytest.fixture(scope="session")
+def compiled_kernels(synthetic_scenario) -> None:  # noqa: ANN001
+    """Compile the rollout kernels into numba's on-disk cache once, here, before agent processes need them.
+
+    On a fresh checkout every spawned agent would otherwise compile them at once, on two cores.
+    """
+    from agents.rollout import warm_up
+
+    warm_up(synthetic_scenario.city)

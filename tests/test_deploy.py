@@ -21,6 +21,7 @@ from coordinator.runtime import FleetConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 NETNS = ROOT / "deploy" / "netns.sh"
+pytestmark = pytest.mark.usefixtures("compiled_kernels")
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +53,7 @@ def test_agents_on_another_host_make_the_in_process_decisions(hosts: str, tmp_pa
         wait = [sys.executable, "-c", "from bus.router import wait_for_tcp; wait_for_tcp('10.77.0.1', 7447, 30)"]
         subprocess.run(["ip", "netns", "exec", h2, *wait], check=True, env=env, timeout=60)
         coord = subprocess.Popen(on(h1, "coordinator", "--connect", endpoint, "--run", "hosts", "--taxis", "2", "--minutes", "6",
-                                    "--forecast", "true-rate", "--samples", "50", "--json", str(out)),
+                                    "--forecast", "true-rate", "--samples", "50", "--deadline", "120", "--join-timeout", "300", "--json", str(out)),
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
         agents = subprocess.Popen(on(h2, "agents", "--connect", endpoint, "--run", "hosts", "--ids", "0-1"),
                                   stderr=subprocess.PIPE, text=True, env=env)

@@ -20,6 +20,7 @@ from coordinator.fleet import in_process, run_local_fleet
 from coordinator.runtime import FleetConfig
 
 CLI = [sys.executable, "-m", "coordinator.cli"]
+pytestmark = pytest.mark.usefixtures("compiled_kernels")
 
 
 @pytest.mark.parametrize(
@@ -27,7 +28,7 @@ CLI = [sys.executable, "-m", "coordinator.cli"]
     [("surge", {"forecast": "true-rate", "samples": 100}), ("garces2023", {"samples": 50, "horizon": 5})],
 )
 def test_distributed_run_makes_the_in_process_decisions(policy: str, options: dict) -> None:
-    cfg = FleetConfig(run=f"same-{policy}", taxis=3, minutes=8, policy=policy, options=options, deadline_s=60)
+    cfg = FleetConfig(run=f"same-{policy}", taxis=3, minutes=8, policy=policy, options=options, deadline_s=120, join_timeout_s=300)
     dist = run_local_fleet(cfg)
     ref = in_process(cfg)
     assert dist["fallbacks"] == 0 and dist["agents_exit_codes"] == [0, 0, 0]
@@ -70,7 +71,7 @@ def test_silent_agent_gets_base_controls_bad_messages_are_ignored_and_a_restarte
     run, out, deadline = "rejoin", tmp_path / "result.json", 2.0
     coord = subprocess.Popen(
         [*CLI, "coordinator", "--connect", router, "--run", run, "--taxis", "3", "--minutes", "30", "--forecast", "true-rate",
-         "--samples", "50", "--deadline", str(deadline), "--minute-seconds", "0.5", "--join-timeout", "60", "--json", str(out)],
+         "--samples", "50", "--deadline", str(deadline), "--minute-seconds", "0.5", "--join-timeout", "300", "--json", str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     others = subprocess.Popen([*CLI, "agents", "--connect", router, "--run", run, "--ids", "0,2"], stderr=subprocess.PIPE, text=True)
