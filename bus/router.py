@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import signal
 import socket
+import sys
 import threading
 import time
 
@@ -11,14 +12,17 @@ from bus.session import SessionArgs, open_session
 from city.errors import ConfigError
 
 
-def router_main(bus: SessionArgs) -> None:
-    """Open a router session and hold it until SIGTERM or SIGINT."""
+def router_main(bus: SessionArgs, announce: bool = False) -> None:
+    """Open a router session and hold it until SIGTERM or SIGINT; with ``announce``, say where it listens once it does."""
     if bus.mode != "router":
         raise ConfigError(f"router_main needs mode 'router', got {bus.mode!r}")
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     with open_session(bus):
+        if announce:
+            where = ", ".join(bus.listen) or f"the endpoints of {bus.config}"
+            print(f"zenoh router listening on {where}; Ctrl-C stops it", file=sys.stderr, flush=True)
         stop.wait()
 
 

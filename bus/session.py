@@ -92,7 +92,8 @@ def open_session(args: SessionArgs) -> Iterator[zenoh.Session]:
     try:
         session = zenoh.open(conf)
     except Exception as exc:
-        where = ", ".join([f"connect {e}" for e in args.connect] + [f"listen {e}" for e in args.listen]) or "default endpoints"
+        where = ", ".join([f"connect {e}" for e in args.connect] + [f"listen {e}" for e in args.listen]
+                          + ([f"config {args.config}"] if args.config else [])) or "zenoh's default endpoints"
         raise ConfigError(f"cannot open a zenoh {args.mode} session ({where}): {exc}") from None
     with session:
         yield session

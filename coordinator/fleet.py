@@ -175,10 +175,7 @@ def cmd_fleet(args) -> int:  # noqa: ANN001
 def cmd_router(args) -> int:  # noqa: ANN001
     from bus.session import session_args
 
-    bus = session_args(args)
-    where = ", ".join(bus.listen) or f"the endpoints of {bus.config}"
-    print(f"zenoh router listening on {where}; Ctrl-C stops it", file=sys.stderr, flush=True)
-    router_main(bus)
+    router_main(session_args(args), announce=True)
     return 0
 
 

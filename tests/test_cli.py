@@ -29,6 +29,13 @@ def run_cli(*args: str) -> subprocess.CompletedProcess:
         (["evaluate", "--policies", "greedy:speed=2", "--seeds", "1", "--minutes", "1"], "policy 'greedy': unknown options ['speed']"),
         (["evaluate", "--policies", "surge:colour=red", "--seeds", "1", "--minutes", "1"], "policy 'surge'"),
         (["evaluate", "--resume"], "--resume needs --json"),
+        (["fleet", "--policy", "greedy"], "the distributed runtime runs rollout policies"),
+        (["fleet", "--deadline", "0"], "--deadline and --join-timeout must be positive"),
+        (["coordinator", "--connect", "7447"], "zenoh endpoint '7447': expected PROTOCOL/ADDRESS"),
+        (["coordinator", "--run", "a/b"], "run name 'a/b'"),
+        (["agents", "--ids", "0-x"], "--ids '0-x': '0-x' is not N or N-M"),
+        (["router", "--config", "/nonexistent.json5"], "zenoh config /nonexistent.json5: no such file"),
+        (["report", "/nonexistent.json"], "/nonexistent.json: no such file"),
     ],
 )
 def test_bad_options_give_one_line_and_exit_2(args: list[str], message: str, capsys: pytest.CaptureFixture) -> None:
@@ -45,7 +52,7 @@ def test_bad_flag_values_are_rejected_by_argparse(args: list[str]) -> None:
 
 
 def test_every_subcommand_has_help() -> None:
-    for sub in (["evaluate"], ["city"], ["demand"], ["demo"], ["report"], ["bench", "city"], ["bench", "sim"]):
+    for sub in (["evaluate"], ["city"], ["demand"], ["demo"], ["report"], ["fleet"], ["router"], ["coordinator"], ["agents"], ["bench", "city"], ["bench", "sim"]):
         proc = run_cli(*sub, "--help")
         assert proc.returncode == 0, proc.stderr
         assert "usage: surge" in proc.stdout
