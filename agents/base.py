@@ -78,15 +78,20 @@ def policy_names() -> list[str]:
     return sorted(set(POLICIES) | set(_LAZY))
 
 
-def make_policy(name: str, city: City, **options: Any) -> Policy:
-    """Instantiate a registered policy; an unknown name is a :class:`ConfigError`."""
+def policy_class(name: str) -> type[Policy]:
+    """The registered class of ``name``, importing its module on first use; an unknown name is a :class:`ConfigError`."""
     if name not in POLICIES and name in _LAZY:
         import importlib
 
         importlib.import_module(_LAZY[name])
     if name not in POLICIES:
         raise ConfigError(f"unknown policy {name!r}; choose from {', '.join(policy_names())}")
-    cls = POLICIES[name]
+    return POLICIES[name]
+
+
+def make_policy(name: str, city: City, **options: Any) -> Policy:
+    """Instantiate a registered policy; an unknown name or option is a :class:`ConfigError`."""
+    cls = policy_class(name)
     try:
         inspect.signature(cls).bind(city, **options)
     except TypeError as exc:

@@ -387,11 +387,19 @@ class RolloutPolicy(Policy):
 
     defaults: ClassVar[dict[str, Any]] = {}
 
-    def __init__(
-        self,
-        city: City,
-        forecast: str | None = None,
-        model: str | Path | None = None,
+    def __init__(self, city: City, forecast: str | None = None, model: str | Path | None = None, **planner: Any) -> None:
+        super().__init__(city)
+        try:
+            self.config = self.rollout_config(**planner)
+        except TypeError as exc:
+            raise ConfigError(f"policy {self.name!r}: {exc}") from None
+        self.provider: ForecastProvider = make_provider(forecast or self.defaults["forecast"], model)
+        self.context: EpisodeContext | None = None
+        self._tables: dict[int, DemandTables] = {}
+
+    @classmethod
+    def rollout_config(
+        cls,
         horizon: int | None = None,
         samples: int | None = None,
         base: str | None = None,
@@ -399,11 +407,11 @@ class RolloutPolicy(Policy):
         ce: str | None = None,
         seed: int | None = None,
         prune: int | str | None = "auto",
-    ) -> None:
-        super().__init__(city)
-        d = self.defaults
+    ) -> RolloutConfig:
+        """The planner settings of this policy with ``None`` options at its defaults; no forecast is loaded."""
+        d = cls.defaults
         H = int(horizon if horizon is not None else d["horizon"])
-        self.config = RolloutConfig(
+        return RolloutConfig(
             horizon=H,
             samples=int(samples if samples is not None else d["samples"]),
             base=base or d["base"],
@@ -412,9 +420,6 @@ class RolloutPolicy(Policy):
             seed=int(seed if seed is not None else 0),
             prune=default_prune(H) if prune == "auto" else (None if prune is None else int(prune)),
         )
-        self.provider: ForecastProvider = make_provider(forecast or d["forecast"], model)
-        self.context: EpisodeContext | None = None
-        self._tables: dict[int, DemandTables] = {}
 
     def reset(self, context: EpisodeContext) -> None:
         if context.world is None:

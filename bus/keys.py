@@ -11,6 +11,7 @@ key                        who writes                  what
 ``control/<agent>``        agent                       proposed :class:`~bus.wire.Control`
 ``committed/<agent>``      coordinator                 committed :class:`~bus.wire.Control`
 ``alive/<agent>``          agent (liveliness token)    present while the agent runs
+``predictor``              predictor (queryable)       :class:`~bus.wire.ForecastMsg` for a :class:`~bus.wire.ForecastRequest`
 ``stop``                   coordinator                 :class:`~bus.wire.Stop`
 =========================  ==========================  ==============================
 """
@@ -38,6 +39,7 @@ class Keys:
         self.state = f"{self.root}/state"
         self.forecast = f"{self.root}/forecast"
         self.stop = f"{self.root}/stop"
+        self.predictor = f"{self.root}/predictor"
         self.all_controls = f"{self.root}/control/*"
         self.all_committed = f"{self.root}/committed/*"
         self.all_alive = f"{self.root}/alive/*"

@@ -144,6 +144,23 @@ class ForecastMsg(Message):
 
 
 @dataclass(frozen=True)
+class ForecastRequest(Message):
+    """The coordinator asks the predictor service for the forecast of hour ``hour`` of the episode, starting at ``when``."""
+
+    kind: ClassVar[str] = "forecast-request"
+    hour: int
+    when: str
+
+    def __post_init__(self) -> None:
+        import datetime as dt
+
+        try:
+            dt.datetime.fromisoformat(self.when)
+        except ValueError:
+            raise ValueError(f"field 'when': {self.when!r} is not an ISO date and time") from None
+
+
+@dataclass(frozen=True)
 class State(Message):
     """The fleet at minute ``t`` and the change in outstanding requests since ``t - 1``.
 

@@ -272,7 +272,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     ns = argparse.Namespace(
         run="demo", scenario="synthetic", data=None, date="2022-11-17", hour=19, minutes=args.minutes, taxis=args.taxis,
         seed=0, world_seed=0, policy="surge", forecast="true-rate", model=None, horizon=None, samples=None,
-        deadline=30.0, join_timeout=120.0, minute_seconds=0.0, json=args.json, check=True,
+        deadline=30.0, join_timeout=120.0, minute_seconds=0.0, predictor=False, json=args.json, check=True,
     )
     return cmd_fleet(ns)
 

@@ -75,6 +75,13 @@ def run_local_fleet(cfg: FleetConfig, *, startup_timeout_s: float = 60.0) -> dic
         wait_for_tcp("127.0.0.1", port, startup_timeout_s)
         with tempfile.TemporaryDirectory(prefix="surge-fleet-") as tmp:
             result_path = str(Path(tmp) / "result.json")
+            if cfg.predictor:
+                from predictor.serve import ServeConfig, serve_main
+
+                serve = ServeConfig(run=cfg.run, scenario=cfg.scenario, data_dir=cfg.data_dir, world_seed=cfg.world_seed,
+                                    forecast=cfg.forecast_name(), model=cfg.options.get("model"))
+                procs.append(ctx.Process(target=serve_main, args=(serve, client), name="surge-predictor"))
+                procs[-1].start()
             coord = ctx.Process(target=_coordinator_entry, args=(cfg, client, result_path), name="surge-coordinator")
             coord.start()
             procs.append(coord)
@@ -121,6 +128,8 @@ def _fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  #
     p.add_argument("--join-timeout", type=float, default=120.0, help="seconds to wait for every agent to join")
     p.add_argument("--minute-seconds", type=float, default=0.0,
                    help="least wall seconds per simulated minute (default 0: as fast as the agents plan; 60: real time)")
+    p.add_argument("--predictor", action="store_true",
+                   help="take each hour's forecast from a `surge predictor serve` process on the bus (surge fleet starts one)")
     p.add_argument("--json", default=None, help="write the run's result here")
 
 
@@ -139,7 +148,7 @@ def fleet_config(args) -> FleetConfig:  # noqa: ANN001
     return FleetConfig(run=args.run, scenario=args.scenario, data_dir=args.data, date=args.date, hour=args.hour,
                        minutes=args.minutes, taxis=args.taxis, seed=args.seed, world_seed=args.world_seed, policy=name,
                        options=options, deadline_s=args.deadline, join_timeout_s=args.join_timeout,
-                       minute_s=args.minute_seconds)
+                       minute_s=args.minute_seconds, predictor=args.predictor)
 
 
 def _print_result(result: dict, path: str | None) -> None:
@@ -156,7 +165,8 @@ def _print_result(result: dict, path: str | None) -> None:
 
 def cmd_fleet(args) -> int:  # noqa: ANN001
     cfg = fleet_config(args)
-    print(f"starting a router, a coordinator and {cfg.taxis} agent processes on loopback", file=sys.stderr, flush=True)
+    roles = "a router, a predictor service, a coordinator" if cfg.predictor else "a router, a coordinator"
+    print(f"starting {roles} and {cfg.taxis} agent processes on loopback", file=sys.stderr, flush=True)
     result = run_local_fleet(cfg)
     if args.check:
         print("running the same instance in-process to compare decisions", file=sys.stderr, flush=True)

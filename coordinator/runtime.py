@@ -20,12 +20,12 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from agents.base import EpisodeContext, make_policy
-from agents.rollout import RolloutPolicy, base_controls, candidate_controls
+from agents.base import EpisodeContext, make_policy, policy_class
+from agents.rollout import RolloutConfig, RolloutPolicy, base_controls, candidate_controls
 from bus.delta import state_message
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
-from bus.wire import Control, ForecastMsg, RunSpec, Snapshot, Stop, Turn, WireError, decode
+from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
 from city.errors import ConfigError
 from city.sim import FleetSim, decisions_hash
 
@@ -49,12 +49,32 @@ class FleetConfig:
     join_timeout_s: float = 120.0
     #: Least wall time per simulated minute: 0 runs as fast as the agents plan, 60 in real time.
     minute_s: float = 0.0
+    #: Ask a ``surge predictor serve`` process on the bus for each hour's forecast instead of computing it here.
+    predictor: bool = False
+
+    def policy_class(self) -> type[RolloutPolicy]:
+        cls = policy_class(self.policy)
+        if not issubclass(cls, RolloutPolicy):
+            raise ConfigError(f"policy {self.policy!r}: the distributed runtime runs rollout policies (surge, garces2023)")
+        return cls
+
+    def forecast_name(self) -> str:
+        """The forecast provider the run uses: the ``forecast`` option, or the policy's default."""
+        return str(self.options.get("forecast") or self.policy_class().defaults["forecast"])
 
     def make_policy(self, city) -> RolloutPolicy:  # noqa: ANN001
-        policy = make_policy(self.policy, city, **self.options)
-        if not isinstance(policy, RolloutPolicy):
-            raise ConfigError(f"policy {self.policy!r}: the distributed runtime runs rollout policies (surge, garces2023)")
-        return policy
+        """The in-process policy: the reference, and the forecast source when there is no predictor service."""
+        self.policy_class()
+        return make_policy(self.policy, city, **self.options)  # type: ignore[return-value]
+
+    def rollout_config(self) -> RolloutConfig:
+        """The planner settings alone, without loading a forecast (the predictor service has it)."""
+        cls = self.policy_class()
+        planner = {k: v for k, v in self.options.items() if k not in ("forecast", "model")}
+        try:
+            return cls.rollout_config(**planner)
+        except TypeError as exc:
+            raise ConfigError(f"policy {self.policy!r}: {exc}") from None
 
 
 def log(message: str) -> None:
@@ -74,13 +94,19 @@ class Coordinator:
         scen = load_scenario(config.scenario, config.data_dir, seed=config.world_seed)
         self.city = scen.city
         date = dt.date.fromisoformat(config.date)
-        self.policy = config.make_policy(self.city)
-        self.policy.reset(EpisodeContext(city=self.city, date=date, hour=config.hour, minutes=config.minutes,
-                                         seed=config.seed, world=scen.world))
+        self.start = dt.datetime.combine(date, dt.time(config.hour))
+        self.policy: RolloutPolicy | None = None
+        if config.predictor:
+            self.rollout = config.rollout_config()
+        else:
+            self.policy = config.make_policy(self.city)
+            self.policy.reset(EpisodeContext(city=self.city, date=date, hour=config.hour, minutes=config.minutes,
+                                             seed=config.seed, world=scen.world))
+            self.rollout = self.policy.config
         self.sim = FleetSim(self.city, episode_requests(scen.world, date, config.hour, config.minutes),
                             initial_positions(self.city, config.taxis, config.seed))
         self.spec = RunSpec(run=config.run, scenario=config.scenario, data_dir=config.data_dir, city=self.city.summary(), taxis=config.taxis,
-                            minutes=config.minutes, policy=config.policy, rollout=asdict(self.policy.config),
+                            minutes=config.minutes, policy=config.policy, rollout=asdict(self.rollout),
                             deadline_s=config.deadline_s)
         self.alive: set[int] = set()
         self.forecast_msg = b""
@@ -99,11 +125,10 @@ class Coordinator:
                 else:
                     self.alive.discard(agent)
                     log(f"agent {agent} left")
-        elif tag == "spec":
-            payload.reply(self.keys.spec, self.spec.encode())  # type: ignore[attr-defined]
-        elif tag == "snapshot":
-            snap = Snapshot(state=self.full_state(), forecast=self.forecast_msg)
-            payload.reply(self.keys.snapshot, snap.encode())  # type: ignore[attr-defined]
+        elif tag in ("spec", "snapshot"):
+            answer = self.spec if tag == "spec" else Snapshot(state=self.full_state(), forecast=self.forecast_msg)
+            payload.reply(key, answer.encode())  # type: ignore[attr-defined]
+            payload.drop()  # type: ignore[attr-defined]  # ends the asker's get() now, not when the query is collected
         elif tag == "control":
             try:
                 c = decode(payload, Control, key)  # type: ignore[arg-type]
@@ -167,12 +192,11 @@ class Coordinator:
             t0 = time.perf_counter()
             obs = self.sim.observe()
             if t % 60 == 0:
-                fc = self.policy.forecast(t // 60)
-                self.forecast_msg = ForecastMsg(hour=t // 60, eta=fc.eta, rho=fc.rho, delta=fc.delta, beta=fc.beta).encode()
+                self.forecast_msg = self._forecast(session, inbox, t // 60)
                 pub_forecast.put(self.forecast_msg)
             pub_state.put(state_message(obs, previous).encode())
             previous = np.asarray(obs.req_index)
-            base = base_controls(self.city, self.policy.config, obs)
+            base = base_controls(self.city, self.rollout, obs)
             u = base.copy()
             for agent in np.flatnonzero(obs.tau == 0).tolist():
                 got = self._turn(inbox, turn_pub[agent], t, agent)
@@ -221,6 +245,27 @@ class Coordinator:
             "agent_peak_rss_mb": float(rss.max()),
             "wall_seconds": time.perf_counter() - t_start,
         }
+
+    def _forecast(self, session, inbox: Inbox, hour: int) -> bytes:  # noqa: ANN001
+        """The encoded forecast of the episode's hour ``hour``: computed here, or asked of the predictor service."""
+        if self.policy is not None:
+            fc = self.policy.forecast(hour)
+            return ForecastMsg(hour=hour, eta=fc.eta, rho=fc.rho, delta=fc.delta, beta=fc.beta).encode()
+        when = self.start + dt.timedelta(hours=hour)
+        request = ForecastRequest(hour=hour, when=when.isoformat()).encode()
+        deadline = time.monotonic() + self.cfg.join_timeout_s
+        while time.monotonic() < deadline:
+            for reply in session.get(self.keys.predictor, payload=request, timeout=10.0):
+                if reply.ok is not None:
+                    msg = decode(reply.ok.payload.to_bytes(), ForecastMsg, self.keys.predictor)
+                    if msg.hour != hour or msg.eta.shape != (self.city.n_sectors,) or msg.rho.shape != (self.city.n_nodes,):  # type: ignore[attr-defined]
+                        raise ConfigError(f"{self.keys.predictor}: the forecast does not fit hour {hour} of this city")
+                    return reply.ok.payload.to_bytes()
+                why = reply.err.payload.to_bytes().decode(errors="replace")
+                if why != "Timeout":
+                    raise ConfigError(f"{self.keys.predictor}: the predictor refused hour {when:%Y-%m-%d %H}:00: {why}")
+            self._pace(inbox, time.perf_counter() + 0.5)
+        raise ConfigError(f"run {self.cfg.run!r}: no predictor answered on {self.keys.predictor} within {self.cfg.join_timeout_s:.0f} s")
 
     def _pace(self, inbox: Inbox, until: float) -> None:
         """Wait out the rest of the minute, still serving joins and snapshots."""

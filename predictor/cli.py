@@ -1,4 +1,4 @@
-"""``surge predictor train|eval``.  Nothing heavy is imported at module import time."""
+"""``surge predictor train|eval|serve``.  Nothing heavy is imported at module import time."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from city.errors import ConfigError
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("predictor", help="train and evaluate the event-informed demand predictor")
-    sub = p.add_subparsers(dest="predictor_command", required=True, metavar="{train,eval}")
+    sub = p.add_subparsers(dest="predictor_command", required=True, metavar="{train,eval,serve}")
 
     t = sub.add_parser("train", help="embed events, train the no-event, event and standard networks (resumable)")
     t.add_argument("--scenario", choices=("synthetic", "nyc"), default="synthetic")
@@ -35,6 +35,28 @@ def add_parser(subparsers) -> None:
     e.add_argument("--data", default=None, help="override the data directory recorded in the model")
     e.add_argument("--cache", default=None, help="embedding cache root")
     e.set_defaults(func=eval_main)
+
+    from bus.session import add_session_args
+
+    v = sub.add_parser("serve", help="answer a distributed run's forecast queries on the bus (torch stays in this process)")
+    add_session_args(v)
+    v.add_argument("--run", default="demo", help="run name (as the coordinator's --run)")
+    v.add_argument("--scenario", choices=("synthetic", "nyc"), default="synthetic")
+    v.add_argument("--data", default=None, help="data directory laid out like shared/data (needed for nyc)")
+    v.add_argument("--world-seed", type=int, default=0, help="seed of the demand world (as the coordinator's)")
+    v.add_argument("--forecast", default="model", help="provider to serve: model (default), true-rate or previous-hour")
+    v.add_argument("--model", default=None, help="trained model directory for --forecast model")
+    v.set_defaults(func=serve_cmd)
+
+
+def serve_cmd(args) -> int:
+    from bus.session import session_args
+    from predictor.serve import ForecastService, ServeConfig
+
+    cfg = ServeConfig(run=args.run, scenario=args.scenario, data_dir=args.data, world_seed=args.world_seed,
+                      forecast=args.forecast, model=args.model)
+    ForecastService(cfg).run(session_args(args))
+    return 0
 
 
 # ----------------------------------------------------------------- worlds

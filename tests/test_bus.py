@@ -14,7 +14,7 @@ from agents.greedy import greedy_controls
 from bus.delta import StateView, state_message
 from bus.keys import Keys
 from bus.session import DEFAULT_ENDPOINT, SessionArgs, add_session_args, session_args
-from bus.wire import Control, ForecastMsg, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
+from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
 from city.errors import ConfigError
 from city.sim import FleetSim
 from coordinator.evaluate import episode_requests, initial_positions
@@ -91,6 +91,15 @@ def test_state_deltas_rebuild_every_observation(synthetic_scenario) -> None:  # 
     later = StateView()
     assert not later.apply(decode(state_message(sim.observe(), previous).encode(), State))  # a delta needs a base
     assert later.apply(gap) and later.obs.t == sim.observe().t
+
+
+def test_forecast_request_checks_its_time() -> None:
+    req = ForecastRequest(hour=2, when="2022-11-17T21:00:00")
+    assert decode(req.encode(), ForecastRequest) == req
+    bad = msgpack.unpackb(req.encode())
+    bad["when"] = "yesterday"
+    with pytest.raises(WireError, match="k: field 'when': 'yesterday' is not an ISO date and time"):
+        decode(msgpack.packb(bad), ForecastRequest, "k")
 
 
 def test_keys_and_ids() -> None:

@@ -36,6 +36,8 @@ def run_cli(*args: str) -> subprocess.CompletedProcess:
         (["agents", "--ids", "0-x"], "--ids '0-x': '0-x' is not N or N-M"),
         (["router", "--config", "/nonexistent.json5"], "zenoh config /nonexistent.json5: no such file"),
         (["report", "/nonexistent.json"], "/nonexistent.json: no such file"),
+        (["predictor", "serve", "--forecast", "bogus"], "unknown forecast 'bogus'"),
+        (["predictor", "serve"], "forecast 'model' needs a trained predictor"),
     ],
 )
 def test_bad_options_give_one_line_and_exit_2(args: list[str], message: str, capsys: pytest.CaptureFixture) -> None:
@@ -52,7 +54,7 @@ def test_bad_flag_values_are_rejected_by_argparse(args: list[str]) -> None:
 
 
 def test_every_subcommand_has_help() -> None:
-    for sub in (["evaluate"], ["city"], ["demand"], ["demo"], ["report"], ["fleet"], ["router"], ["coordinator"], ["agents"], ["bench", "city"], ["bench", "sim"]):
+    for sub in (["evaluate"], ["city"], ["demand"], ["demo"], ["report"], ["fleet"], ["router"], ["coordinator"], ["agents"], ["predictor", "serve"], ["bench", "city"], ["bench", "sim"]):
         proc = run_cli(*sub, "--help")
         assert proc.returncode == 0, proc.stderr
         assert "usage: surge" in proc.stdout

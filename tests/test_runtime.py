@@ -24,11 +24,13 @@ pytestmark = pytest.mark.usefixtures("compiled_kernels")
 
 
 @pytest.mark.parametrize(
-    ("policy", "options"),
-    [("surge", {"forecast": "true-rate", "samples": 100}), ("garces2023", {"samples": 50, "horizon": 5})],
+    ("policy", "options", "predictor"),
+    [("surge", {"forecast": "true-rate", "samples": 100}, True), ("garces2023", {"samples": 50, "horizon": 5}, False)],
 )
-def test_distributed_run_makes_the_in_process_decisions(policy: str, options: dict) -> None:
-    cfg = FleetConfig(run=f"same-{policy}", taxis=3, minutes=8, policy=policy, options=options, deadline_s=120, join_timeout_s=300)
+def test_distributed_run_makes_the_in_process_decisions(policy: str, options: dict, predictor: bool) -> None:
+    """surge takes its forecasts from a predictor service process; garces2023 from the coordinator."""
+    cfg = FleetConfig(run=f"same-{policy}", taxis=3, minutes=8, policy=policy, options=options, deadline_s=120,
+                      join_timeout_s=300, predictor=predictor)
     dist = run_local_fleet(cfg)
     ref = in_process(cfg)
     assert dist["fallbacks"] == 0 and dist["agents_exit_codes"] == [0, 0, 0]
@@ -111,3 +113,40 @@ def test_fleet_command_checks_against_in_process(tmp_path: Path) -> None:
     assert "decisions identical" in proc.stdout and "minute 5/5" in proc.stderr
     doc = json.loads(out.read_text())
     assert doc["same_decisions"] and doc["wall_seconds"] < time.monotonic() - t0
+
+
+ASK = """
+import sys
+from bus.session import SessionArgs, open_session
+from bus.wire import ForecastMsg, ForecastRequest, decode
+with open_session(SessionArgs(mode="client", connect=[sys.argv[1]])) as s:
+    for req in (b"junk", ForecastRequest(hour=0, when="2022-11-17T19:00:00").encode(),
+                ForecastRequest(hour=1, when="2022-11-17T20:00:00").encode()):
+        for rep in s.get("surge/ask/predictor", payload=req, timeout=20.0):
+            if rep.ok is not None:
+                msg = decode(rep.ok.payload.to_bytes(), ForecastMsg)
+                print("ok", msg.hour, msg.eta.shape[0], round(float(msg.eta.sum()), 6))
+            else:
+                print("err", rep.err.payload.to_bytes().decode())
+"""
+
+
+def test_predictor_service_refuses_bad_requests_and_keeps_serving(router: str, synthetic_scenario) -> None:  # noqa: ANN001
+    import datetime as dt
+
+    serve = subprocess.Popen([*CLI, "predictor", "serve", "--connect", router, "--run", "ask", "--forecast", "true-rate"],
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        assert "serving true-rate forecasts" in serve.stderr.readline()
+        out = subprocess.run([sys.executable, "-c", ASK, router], capture_output=True, text=True, timeout=120)
+    finally:
+        serve.terminate()
+        serve.wait(10)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith("err surge/ask/predictor: not msgpack")
+    from agents.forecast import make_provider
+
+    eta = make_provider("true-rate").forecast(synthetic_scenario.world, dt.datetime(2022, 11, 17, 19)).eta
+    assert lines[1] == f"ok 0 {synthetic_scenario.city.n_sectors} {round(float(eta.sum()), 6)}"
+    assert lines[2].startswith("ok 1 ") and len(lines) == 3

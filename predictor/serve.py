@@ -1,0 +1,91 @@
+"""The predictor as a service on the bus: it answers a run's forecast queries.
+
+With it, the coordinator asks for each hour's forecast over zenoh instead of
+computing it, so the trained model (and torch) lives in this one process.
+Any forecast provider can be served (``model`` is the point; ``true-rate`` and
+``previous-hour`` need no training and make the service easy to try).  A bad
+request gets an error reply naming the field, and the service keeps serving.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import sys
+from dataclasses import dataclass
+
+from bus.keys import Keys
+from bus.session import Inbox, SessionArgs, open_session
+from bus.wire import ForecastMsg, ForecastRequest, decode
+from city.errors import SurgeError
+
+
+@dataclass(frozen=True)
+class ServeConfig:
+    """Which run to serve, from which demand world, with which provider."""
+
+    run: str
+    scenario: str = "synthetic"
+    data_dir: str | None = None
+    world_seed: int = 0
+    forecast: str = "model"
+    model: str | None = None
+
+
+def log(message: str) -> None:
+    print(f"surge predictor: {message}", file=sys.stderr, flush=True)
+
+
+class ForecastService:
+    """Answers :class:`~bus.wire.ForecastRequest` queries on ``surge/<run>/predictor``."""
+
+    def __init__(self, config: ServeConfig) -> None:
+        from agents.forecast import make_provider
+        from city.scenario import load_scenario
+
+        self.cfg = config
+        self.keys = Keys(config.run)
+        self.provider = make_provider(config.forecast, config.model)
+        self.world = load_scenario(config.scenario, config.data_dir, seed=config.world_seed).world
+        self.answered = 0
+
+    def answer(self, payload: bytes) -> bytes:
+        """The encoded forecast for one encoded request; :class:`SurgeError` for a bad one."""
+        req = decode(payload, ForecastRequest, self.keys.predictor)
+        fc = self.provider.forecast(self.world, dt.datetime.fromisoformat(req.when))  # type: ignore[attr-defined]
+        return ForecastMsg(hour=req.hour, eta=fc.eta, rho=fc.rho, delta=fc.delta, beta=fc.beta).encode()  # type: ignore[attr-defined]
+
+    def run(self, bus: SessionArgs) -> None:
+        """Serve until interrupted."""
+        with open_session(bus) as session:
+            inbox = Inbox()
+            queryable = inbox.serve(session, self.keys.predictor, "query")
+            log(f"serving {self.cfg.forecast} forecasts for run {self.cfg.run!r} on {self.keys.predictor}")
+            try:
+                while True:
+                    item = inbox.get(timeout=1.0)
+                    if item is None:
+                        continue
+                    query = item[2]
+                    payload = query.payload.to_bytes() if query.payload is not None else b""
+                    try:
+                        query.reply(self.keys.predictor, self.answer(payload))
+                        self.answered += 1
+                    except Exception as exc:  # a bad request, or one the provider cannot answer: refuse it, keep serving
+                        why = str(exc) if isinstance(exc, SurgeError) else f"{type(exc).__name__}: {exc}"
+                        log(f"refused: {why}")
+                        query.reply_err(why.encode())
+                    finally:
+                        query.drop()  # the querier's get() ends now, not when this object is collected
+            finally:
+                queryable.undeclare()
+
+
+def serve_main(config: ServeConfig, bus: SessionArgs) -> None:
+    """Entry point of a spawned predictor process: serve, and report a failure to start as one line."""
+    try:
+        ForecastService(config).run(bus)
+    except SurgeError as exc:
+        log(f"error: {exc}")
+        sys.exit(2)
+    except KeyboardInterrupt:
+        pass
