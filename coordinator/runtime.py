@@ -110,7 +110,6 @@ class Coordinator:
                             deadline_s=config.deadline_s)
         self.alive: set[int] = set()
         self.forecast_msg = b""
-        self.state_msg = b""
         self.stale = 0
 
     # ------------------------------------------------------------------ inbox
