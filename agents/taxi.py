@@ -145,18 +145,25 @@ class TaxiAgent:
             except WireError as exc:
                 log(self.me, f"ignored: {exc}")
                 continue
+            self._prepare()
             self._maybe_plan(out)
+
+    def _prepare(self) -> None:
+        """Build the minute's shared context as soon as the state and forecast are in, while earlier agents plan."""
+        obs = self.view.obs
+        if obs is None or obs.t // 60 not in self.tables or obs.tau[self.me] > 0:
+            return
+        if self.context is None or self.context.obs.t != obs.t:
+            self.context = prepare_step(self.city, self.rollout, obs, self.tables[obs.t // 60], obs.t % 60)
 
     def _maybe_plan(self, out) -> None:  # noqa: ANN001
         turn, obs = self.pending, self.view.obs
-        if turn is None or obs is None or obs.t != turn.t or turn.t // 60 not in self.tables:
+        if turn is None or obs is None or obs.t != turn.t or self.context is None or self.context.obs.t != turn.t:
             return
         free_before = np.flatnonzero(obs.tau[: self.me] == 0)
         mine = self.committed.get(turn.t, {})
         if any(int(a) not in mine for a in free_before):
             return
-        if self.context is None or self.context.obs.t != turn.t:
-            self.context = prepare_step(self.city, self.rollout, obs, self.tables[turn.t // 60], turn.t % 60)
         committed = self.context.base_controls[: self.me].copy()
         for a in free_before:
             committed[a] = mine[int(a)]
