@@ -43,17 +43,10 @@ def _coordinator_entry(cfg: FleetConfig, bus: SessionArgs, result_path: str) -> 
 
 def in_process(cfg: FleetConfig) -> dict:
     """The same instance under the in-process policy: the reference the distributed run must match."""
-    import datetime as dt
+    from coordinator.evaluate import run_episode
 
-    from agents.base import EpisodeContext
-    from city.scenario import load_scenario
-    from coordinator.evaluate import episode_requests, initial_positions, run_episode
-
-    scen = load_scenario(cfg.scenario, cfg.data_dir, seed=cfg.world_seed)
-    date = dt.date.fromisoformat(cfg.date)
-    context = EpisodeContext(city=scen.city, date=date, hour=cfg.hour, minutes=cfg.minutes, seed=cfg.seed, world=scen.world)
-    res = run_episode(scen.city, cfg.make_policy(scen.city), episode_requests(scen.world, date, cfg.hour, cfg.minutes),
-                      initial_positions(scen.city, cfg.taxis, cfg.seed), context)
+    scen, requests, start, context = cfg.instance()
+    res = run_episode(scen.city, cfg.make_policy(scen.city), requests, start, context)
     return {"total_cost": res.total_cost, "served": res.served, "decisions_sha256": res.decisions_sha256,
             "step_seconds": {"median": float(np.median(res.plan_seconds)), "max": float(np.max(res.plan_seconds))}}
 
@@ -140,8 +133,7 @@ def fleet_config(args) -> FleetConfig:  # noqa: ANN001
 
     check_scenario(args.scenario, args.data)
     name, options = parse_policy(args.policy)
-    if name not in ("surge", "garces2023"):
-        raise ConfigError(f"policy {name!r}: the distributed runtime runs rollout policies (surge, garces2023)")
+    FleetConfig(policy=name).policy_class()
     options = {**rollout_options(args, [args.policy]).get(args.policy, {}), **options}
     if args.deadline <= 0 or args.join_timeout <= 0 or args.minute_seconds < 0:
         raise ConfigError("--deadline and --join-timeout must be positive, --minute-seconds not negative")

@@ -17,6 +17,7 @@ import datetime as dt
 import sys
 import time
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -27,7 +28,7 @@ from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
 from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
 from city.errors import ConfigError
-from city.sim import FleetSim, decisions_hash
+from city.sim import FleetSim, Requests, decisions_hash
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,16 @@ class FleetConfig:
     minute_s: float = 0.0
     #: Ask a ``surge predictor serve`` process on the bus for each hour's forecast instead of computing it here.
     predictor: bool = False
+
+    def instance(self) -> tuple[Any, Requests, np.ndarray, EpisodeContext]:
+        """The scenario, requests, start positions and episode context of this run: one place for both runs that must agree."""
+        from city.scenario import load_scenario
+        from coordinator.evaluate import episode_requests, initial_positions
+
+        scen = load_scenario(self.scenario, self.data_dir, seed=self.world_seed)
+        date = dt.date.fromisoformat(self.date)
+        context = EpisodeContext(city=scen.city, date=date, hour=self.hour, minutes=self.minutes, seed=self.seed, world=scen.world)
+        return scen, episode_requests(scen.world, date, self.hour, self.minutes), initial_positions(scen.city, self.taxis, self.seed), context
 
     def policy_class(self) -> type[RolloutPolicy]:
         cls = policy_class(self.policy)
@@ -85,26 +96,20 @@ class Coordinator:
     """Runs one episode over the bus; :meth:`run` returns its metrics and decisions."""
 
     def __init__(self, config: FleetConfig, progress: bool = True) -> None:
-        from city.scenario import load_scenario
-        from coordinator.evaluate import episode_requests, initial_positions
-
         self.cfg = config
         self.keys = Keys(config.run)
         self.progress = progress
-        scen = load_scenario(config.scenario, config.data_dir, seed=config.world_seed)
+        scen, requests, start, context = config.instance()
         self.city = scen.city
-        date = dt.date.fromisoformat(config.date)
-        self.start = dt.datetime.combine(date, dt.time(config.hour))
+        self.start = dt.datetime.combine(context.date, dt.time(config.hour))
         self.policy: RolloutPolicy | None = None
         if config.predictor:
             self.rollout = config.rollout_config()
         else:
             self.policy = config.make_policy(self.city)
-            self.policy.reset(EpisodeContext(city=self.city, date=date, hour=config.hour, minutes=config.minutes,
-                                             seed=config.seed, world=scen.world))
+            self.policy.reset(context)
             self.rollout = self.policy.config
-        self.sim = FleetSim(self.city, episode_requests(scen.world, date, config.hour, config.minutes),
-                            initial_positions(self.city, config.taxis, config.seed))
+        self.sim = FleetSim(self.city, requests, start)
         self.spec = RunSpec(run=config.run, scenario=config.scenario, data_dir=config.data_dir, city=self.city.summary(), taxis=config.taxis,
                             minutes=config.minutes, policy=config.policy, rollout=asdict(self.rollout),
                             deadline_s=config.deadline_s)
