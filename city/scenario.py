@@ -11,6 +11,7 @@ from city.errors import ConfigError
 from city.graph import City
 
 SCENARIOS = ("synthetic", "nyc")
+SCENARIO_HELP = "synthetic (embedded) or nyc (needs --data)"
 #: Bump when a change to a city builder changes its output, so caches rebuild.
 CITY_VERSION = "1"
 

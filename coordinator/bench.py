@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from coordinator.args import hour, iso_date, positive, rollout_options, scenario_args
+
 
 def _stats(xs: list[float]) -> dict:
     return {"median": statistics.median(xs), "min": min(xs), "max": max(xs)}
@@ -34,24 +36,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.set_defaults(func=bench_city)
 
     s = bsub.add_parser("sim", help="simulator steps per second with the greedy policy")
-    s.add_argument("--scenario", default="synthetic")
-    s.add_argument("--data", default=None)
-    s.add_argument("--taxis", type=int, default=100)
-    s.add_argument("--hour", type=int, default=19)
-    s.add_argument("--date", default="2022-11-17")
-    s.add_argument("--episodes", type=int, default=3)
+    scenario_args(s)
+    s.add_argument("--taxis", type=positive, default=100)
+    s.add_argument("--hour", type=hour, default=19)
+    s.add_argument("--date", type=iso_date, default="2022-11-17")
+    s.add_argument("--episodes", type=positive, default=3)
     s.add_argument("--json", default=None)
     s.set_defaults(func=bench_sim)
 
     pl = bsub.add_parser("plan", help="rollout planning time per step from mid-episode states, one fresh process per policy")
-    pl.add_argument("--scenario", default="synthetic", help="synthetic (embedded) or nyc (needs --data)")
-    pl.add_argument("--data", default=None, help="data directory laid out like shared/data (for --scenario nyc)")
-    pl.add_argument("--date", default="2022-11-17")
-    pl.add_argument("--hour", type=int, default=19, help="episode hour (default: the 7 pm surge)")
-    pl.add_argument("--taxis", type=int, default=100)
-    pl.add_argument("--horizon", type=int, default=10)
-    pl.add_argument("--samples", type=int, default=1000)
-    pl.add_argument("--steps", type=int, default=5, help="consecutive planning steps timed")
+    scenario_args(pl)
+    pl.add_argument("--date", type=iso_date, default="2022-11-17")
+    pl.add_argument("--hour", type=hour, default=19, help="episode hour (default: the 7 pm surge)")
+    pl.add_argument("--taxis", type=positive, default=100)
+    pl.add_argument("--horizon", type=positive, default=10)
+    pl.add_argument("--samples", type=positive, default=1000)
+    pl.add_argument("--steps", type=positive, default=5, help="consecutive planning steps timed")
     pl.add_argument("--warmup", type=int, default=25, help="minutes of greedy play before timing (a mid-episode state)")
     pl.add_argument("--seed", type=int, default=0, help="seed of the fleet's initial placement")
     pl.add_argument("--policies", nargs="+", default=["surge", "garces2023"])
@@ -146,7 +146,6 @@ def _plan_child(args: argparse.Namespace, name: str) -> dict:
     from agents.greedy import greedy_controls
     from city.scenario import load_scenario
     from city.sim import FleetSim
-    from coordinator.cli import rollout_options
     from coordinator.evaluate import episode_requests, initial_positions
 
     if args.threads:

@@ -16,84 +16,31 @@ import warnings
 from pathlib import Path
 
 from city.errors import SurgeError
-
-
-def _scenario_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--scenario", default="synthetic", help="synthetic (embedded) or nyc (needs --data)")
-    p.add_argument("--data", default=None, help="data directory laid out like shared/data (for --scenario nyc)")
-
-
-def _date(text: str) -> str:
-    try:
-        dt.date.fromisoformat(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid date {text!r}; use YYYY-MM-DD") from None
-    return text
-
-
-def _hour(text: str) -> int:
-    try:
-        h = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid hour {text!r}") from None
-    if not 0 <= h <= 23:
-        raise argparse.ArgumentTypeError(f"hour {h} is outside 0..23")
-    return h
-
-
-def _positive(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid count {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"{v} must be at least 1")
-    return v
+from coordinator.args import hour, iso_date, positive, rollout_options, scenario_args
 
 
 # --------------------------------------------------------------------- evaluate
 def add_evaluate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate", help="replay city-hours under several policies and compare them")
-    _scenario_args(p)
-    p.add_argument("--date", type=_date, default="2022-11-17", help="evaluation date (default: the paper's 2022-11-17)")
-    p.add_argument("--hours", type=_hour, nargs="+", default=[15, 17, 19, 21])
-    p.add_argument("--seeds", type=_positive, default=25, help="initial states 0..N-1")
-    p.add_argument("--taxis", type=_positive, default=100)
-    p.add_argument("--minutes", type=_positive, default=60, help="episode length N in minutes")
+    scenario_args(p)
+    p.add_argument("--date", type=iso_date, default="2022-11-17", help="evaluation date (default: the paper's 2022-11-17)")
+    p.add_argument("--hours", type=hour, nargs="+", default=[15, 17, 19, 21])
+    p.add_argument("--seeds", type=positive, default=25, help="initial states 0..N-1")
+    p.add_argument("--taxis", type=positive, default=100)
+    p.add_argument("--minutes", type=positive, default=60, help="episode length N in minutes")
     p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"],
                    help="registry names, each optionally with options: surge:forecast=true-rate,samples=500")
     p.add_argument("--forecast", default=None,
                    help="forecast provider for surge (true-rate, previous-hour, model); garces2023 keeps previous-hour")
     p.add_argument("--model", default=None, help="trained predictor directory for surge's --forecast model")
-    p.add_argument("--horizon", type=_positive, default=None, help="rollout horizon H")
-    p.add_argument("--samples", type=_positive, default=None, help="rollout Monte-Carlo samples")
+    p.add_argument("--horizon", type=positive, default=None, help="rollout horizon H")
+    p.add_argument("--samples", type=positive, default=None, help="rollout Monte-Carlo samples")
     p.add_argument("--world-seed", type=int, default=0, help="seed of the synthetic demand world")
-    p.add_argument("--jobs", type=_positive, default=1, help="worker processes")
+    p.add_argument("--jobs", type=positive, default=1, help="worker processes")
     p.add_argument("--json", default=None, help="write surge.results/1 JSON here, updated after every instance")
     p.add_argument("--plot", default=None, help="write a PNG bar chart of total cost per hour and policy here")
     p.add_argument("--resume", action="store_true", help="keep the instances already in --json and run only the rest")
     p.set_defaults(func=cmd_evaluate)
-
-
-def rollout_options(args: argparse.Namespace, names: list[str]) -> dict[str, dict]:
-    """Per-policy options from the rollout flags, for the policies that take them.
-
-    ``--horizon`` and ``--samples`` go to both rollout policies; ``--forecast``
-    and ``--model`` only to ``surge``, so that ``garces2023`` keeps its
-    previous-hour demand (the baseline as the paper ran it).
-    """
-    shared = {k: v for k, v in (("horizon", args.horizon), ("samples", args.samples)) if v is not None}
-    own = {k: v for k, v in (("forecast", args.forecast), ("model", args.model)) if v is not None}
-    from coordinator.evaluate import parse_policy
-
-    out = {}
-    for label in names:
-        name = parse_policy(label)[0]
-        if name == "surge" and (shared or own):
-            out[label] = {**shared, **own}
-        elif name == "garces2023" and shared:
-            out[label] = dict(shared)
-    return out
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -182,7 +129,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 # ------------------------------------------------------------------------- city
 def add_city(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("city", help="build a scenario's street graph and report its size")
-    _scenario_args(p)
+    scenario_args(p)
     p.add_argument("--save", default=None, help="also save the city file here (.npz)")
     p.set_defaults(func=cmd_city)
 
@@ -207,10 +154,10 @@ def cmd_city(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------- demand
 def add_demand(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demand", help="show the demand of one city-hour against its usual level")
-    _scenario_args(p)
-    p.add_argument("--date", type=_date, default="2022-11-17")
-    p.add_argument("--hour", type=_hour, default=19)
-    p.add_argument("--top", type=_positive, default=8)
+    scenario_args(p)
+    p.add_argument("--date", type=iso_date, default="2022-11-17")
+    p.add_argument("--hour", type=hour, default=19)
+    p.add_argument("--top", type=positive, default=8)
     p.add_argument("--plot", default=None, help="write a PNG bar chart of demand vs usual per sector")
     p.add_argument("--json", default=None)
     p.set_defaults(func=cmd_demand)
@@ -260,8 +207,8 @@ def _demand_plot(rows: list[dict], args: argparse.Namespace) -> None:
 def add_demo(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="the local multi-process fleet at the 7 pm surge on the embedded synthetic city, "
                                      "checked decision for decision against the in-process run")
-    p.add_argument("--taxis", type=_positive, default=10, help="taxis, one agent process each")
-    p.add_argument("--minutes", type=_positive, default=30)
+    p.add_argument("--taxis", type=positive, default=10, help="taxis, one agent process each")
+    p.add_argument("--minutes", type=positive, default=30)
     p.add_argument("--json", default=None, help="write the run's result here")
     p.set_defaults(func=cmd_demo)
 

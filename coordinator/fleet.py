@@ -20,6 +20,7 @@ import numpy as np
 from bus.router import free_tcp_port, router_main, wait_for_tcp
 from bus.session import SessionArgs
 from city.errors import ConfigError, SurgeError
+from coordinator.args import hour, iso_date, positive, rollout_options, scenario_args
 from coordinator.runtime import FleetConfig
 
 
@@ -102,21 +103,19 @@ def run_local_fleet(cfg: FleetConfig, *, startup_timeout_s: float = 60.0) -> dic
 
 # ------------------------------------------------------------------ command line
 def _fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  # noqa: ANN001
-    from coordinator.cli import _date, _hour, _positive, _scenario_args
-
     p.add_argument("--run", default="demo", help="run name: the key-expression prefix surge/<run>/ (default: demo)")
-    _scenario_args(p)
-    p.add_argument("--date", type=_date, default="2022-11-17")
-    p.add_argument("--hour", type=_hour, default=19, help="episode hour (default: the 7 pm surge)")
-    p.add_argument("--minutes", type=_positive, default=minutes)
-    p.add_argument("--taxis", type=_positive, default=taxis, help="taxis, one agent process each")
+    scenario_args(p)
+    p.add_argument("--date", type=iso_date, default="2022-11-17")
+    p.add_argument("--hour", type=hour, default=19, help="episode hour (default: the 7 pm surge)")
+    p.add_argument("--minutes", type=positive, default=minutes)
+    p.add_argument("--taxis", type=positive, default=taxis, help="taxis, one agent process each")
     p.add_argument("--seed", type=int, default=0, help="initial placement seed (as surge evaluate's seeds)")
     p.add_argument("--world-seed", type=int, default=0)
     p.add_argument("--policy", default="surge", help="rollout policy: surge or garces2023, with options as in evaluate")
     p.add_argument("--forecast", default=None, help="forecast provider for surge (true-rate, previous-hour, model)")
     p.add_argument("--model", default=None, help="trained predictor directory for --forecast model")
-    p.add_argument("--horizon", type=_positive, default=None)
-    p.add_argument("--samples", type=_positive, default=samples)
+    p.add_argument("--horizon", type=positive, default=None)
+    p.add_argument("--samples", type=positive, default=samples)
     p.add_argument("--deadline", type=float, default=30.0, help="seconds an agent has for its turn before the base control is used")
     p.add_argument("--join-timeout", type=float, default=120.0, help="seconds to wait for every agent to join")
     p.add_argument("--minute-seconds", type=float, default=0.0,
@@ -128,7 +127,6 @@ def _fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  #
 
 def fleet_config(args) -> FleetConfig:  # noqa: ANN001
     from city.scenario import check_scenario
-    from coordinator.cli import rollout_options
     from coordinator.evaluate import parse_policy
 
     check_scenario(args.scenario, args.data)

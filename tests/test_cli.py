@@ -134,3 +134,11 @@ def test_sigterm_stops_the_worker_pool_and_keeps_finished_instances(tmp_path: Pa
     assert not [w for w in workers if Path(f"/proc/{w}").exists()], "worker processes outlived the run"
     done = json.loads(out.read_text())["episodes"]
     assert 2 <= len(done) < 40 and len(done) % 2 == 0  # whole instances, and not the full run
+
+
+def test_parser_modules_share_the_argument_helpers_without_importing_the_cli() -> None:
+    code = ("import sys, coordinator.fleet, coordinator.bench, coordinator.args, predictor.cli; "
+            "print('coordinator.cli' in sys.modules)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "False"

@@ -1,0 +1,71 @@
+"""Argument helpers shared by every ``surge`` subcommand, as zenoh's examples share one.
+
+Every module that builds a parser (:mod:`coordinator.cli`,
+:mod:`coordinator.fleet`, :mod:`coordinator.bench`)
+imports its argument types and the common option groups from here, so the
+CLI imports those modules and none of them imports the CLI back.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+
+from city.scenario import SCENARIO_HELP
+
+
+def scenario_args(p: argparse.ArgumentParser) -> None:
+    """``--scenario`` and ``--data``: which city and demand world, and where its data lie."""
+    p.add_argument("--scenario", default="synthetic", help=SCENARIO_HELP)
+    p.add_argument("--data", default=None,
+                   help="data directory laid out like shared/data, for scenario files that read from it (nyc, manhattan)")
+
+
+def iso_date(text: str) -> str:
+    """An argparse type: a ``YYYY-MM-DD`` date, kept as text."""
+    try:
+        dt.date.fromisoformat(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid date {text!r}; use YYYY-MM-DD") from None
+    return text
+
+
+def hour(text: str) -> int:
+    """An argparse type: an hour of the day, 0..23."""
+    try:
+        h = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid hour {text!r}") from None
+    if not 0 <= h <= 23:
+        raise argparse.ArgumentTypeError(f"hour {h} is outside 0..23")
+    return h
+
+
+def positive(text: str) -> int:
+    """An argparse type: a count of at least 1."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid count {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"{v} must be at least 1")
+    return v
+
+
+def rollout_options(args: argparse.Namespace, names: list[str]) -> dict[str, dict]:
+    """Per-policy options from the rollout flags, for the policies that take them.
+
+    ``--horizon`` and ``--samples`` go to both rollout policies; ``--forecast``
+    and ``--model`` only to ``surge``, so that ``garces2023`` keeps its
+    previous-hour demand (the baseline as the paper ran it).
+    """
+    shared = {k: v for k, v in (("horizon", args.horizon), ("samples", args.samples)) if v is not None}
+    own = {k: v for k, v in (("forecast", args.forecast), ("model", args.model)) if v is not None}
+    out = {}
+    for label in names:
+        name = label.partition(":")[0].strip()
+        if name == "surge" and (shared or own):
+            out[label] = {**shared, **own}
+        elif name == "garces2023" and shared:
+            out[label] = dict(shared)
+    return out
