@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import datetime as dt
-import inspect
+import math
+import os
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -32,19 +33,88 @@ class EpisodeContext:
     future: Requests | None = None
 
 
+@dataclass(frozen=True)
+class Option:
+    """One declared option of a policy: its type, its range or choices, and named special values.
+
+    ``kind`` is ``int``, ``float`` or ``str``; ``low``/``high`` bound numbers
+    (inclusive); ``choices`` lists the accepted strings; ``words`` maps
+    accepted words (``auto``, ``none``) to the values they stand for.
+    """
+
+    name: str
+    kind: type
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] | None = None
+    words: dict[str, Any] = field(default_factory=dict)
+    help: str = ""
+
+    def accepts(self) -> str:
+        """What this option accepts, in words, for error messages and help."""
+        if self.kind is str:
+            text = f"one of {', '.join(self.choices)}" if self.choices else "a text"
+        else:
+            noun = "an integer" if self.kind is int else "a number"
+            if self.low is not None and self.high is not None:
+                text = f"{noun} from {_num(self.low)} to {_num(self.high)}"
+            elif self.low is not None:
+                text = f"{noun} of at least {_num(self.low)}"
+            elif self.high is not None:
+                text = f"{noun} of at most {_num(self.high)}"
+            else:
+                text = noun
+        return text + "".join(f" or {w}" for w in self.words)
+
+    def parse(self, value: Any) -> Any:
+        """The option's value from text (``"10"``) or an already typed value; ``ValueError`` if not accepted."""
+        if isinstance(value, str) and value.strip().lower() in self.words:
+            return self.words[value.strip().lower()]
+        if value is None or any(value is v for v in self.words.values()):
+            if value in self.words.values():
+                return value
+            raise ValueError(value)
+        if self.kind is str:
+            if isinstance(value, os.PathLike) and not self.choices:
+                value = os.fspath(value)
+            if not isinstance(value, str) or (self.choices and value not in self.choices):
+                raise ValueError(value)
+            return value
+        if isinstance(value, bool):
+            raise ValueError(value)
+        if self.kind is int:
+            if isinstance(value, float) and value.is_integer():
+                value = int(value)
+            out = int(value.strip()) if isinstance(value, str) else value
+            if not isinstance(out, int):
+                raise ValueError(value)
+        else:
+            out = float(value)
+            if not math.isfinite(out):
+                raise ValueError(value)
+        if (self.low is not None and out < self.low) or (self.high is not None and out > self.high):
+            raise ValueError(value)
+        return out
+
+
+def _num(x: float) -> str:
+    return f"{x:g}" if isinstance(x, float) else f"{x:,}"
+
+
 class Policy(ABC):
     """A joint routing policy: one control per taxi per minute.
 
     Controls are node ids (move to an out-neighbour, or stay with the current
     node) or ``city.sim.PICKUP``; a busy taxi's control must be its next hop.
+    ``options`` declares every keyword the constructor takes after ``city``;
+    :func:`check_options` enforces it before the policy is built.
     """
 
     name: ClassVar[str] = ""
     clairvoyant: ClassVar[bool] = False
+    options: ClassVar[tuple[Option, ...]] = ()
 
-    def __init__(self, city: City, **options: Any) -> None:
-        if options:
-            raise ConfigError(f"policy {self.name!r}: unknown options {sorted(options)}")
+    def __init__(self, city: City) -> None:
         self.city = city
 
     def reset(self, context: EpisodeContext) -> None:
@@ -89,14 +159,52 @@ def policy_class(name: str) -> type[Policy]:
     return POLICIES[name]
 
 
-def make_policy(name: str, city: City, **options: Any) -> Policy:
-    """Instantiate a registered policy; an unknown name or option is a :class:`ConfigError`."""
+def check_options(name: str, options: dict[str, Any]) -> dict[str, Any]:
+    """``options`` parsed and checked against what policy ``name`` declares.
+
+    Raises
+    ------
+    ConfigError
+        An unknown policy, an option it does not declare, or a value outside
+        the option's type and range; one line naming policy, option, value
+        and what is accepted.
+    """
     cls = policy_class(name)
-    try:
-        inspect.signature(cls).bind(city, **options)
-    except TypeError as exc:
-        raise ConfigError(f"policy {name!r}: {exc}") from exc
-    return cls(city, **options)
+    declared = {o.name: o for o in cls.options}
+    out: dict[str, Any] = {}
+    for key, value in options.items():
+        if key not in declared:
+            known = f"its options are {', '.join(declared)}" if declared else "it takes no options"
+            raise ConfigError(f"policy {name!r}: unknown option {key!r}; {known}")
+        opt = declared[key]
+        try:
+            out[key] = opt.parse(value)
+        except (TypeError, ValueError):
+            raise ConfigError(f"policy {name!r}: option {key}={value!r} is not accepted; {key} takes {opt.accepts()}") from None
+    return out
+
+
+def split_policy(spec: str) -> tuple[str, dict[str, str]]:
+    """``"name:key=value,key=value"`` → ``(name, {key: value})``, the values still text and unchecked."""
+    name, _, rest = spec.partition(":")
+    raw: dict[str, str] = {}
+    for item in filter(None, rest.split(",")):
+        key, eq, value = item.partition("=")
+        if not eq or not key.strip():
+            raise ConfigError(f"policy {spec!r}: option {item!r} is not key=value")
+        raw[key.strip()] = value.strip()
+    return name.strip(), raw
+
+
+def parse_policy(spec: str) -> tuple[str, dict[str, Any]]:
+    """``"name:key=value,key=value"`` → ``(name, options)``, each option parsed and checked (:func:`check_options`)."""
+    name, raw = split_policy(spec)
+    return name, check_options(name, raw)
+
+
+def make_policy(name: str, city: City, **options: Any) -> Policy:
+    """Instantiate a registered policy; an unknown name or option, or a bad value, is a :class:`ConfigError`."""
+    return policy_class(name)(city, **check_options(name, options))
 
 
 def busy_next_hops(city: City, obs: Observation) -> np.ndarray:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from agents.auction import auction_assignment
-from agents.base import EpisodeContext, Policy, busy_next_hops, head_for, register
+from agents.base import EpisodeContext, Option, Policy, busy_next_hops, head_for, register
 from city.errors import ConfigError
 from city.graph import City
 from city.sim import Observation, Requests
@@ -24,6 +24,10 @@ from city.sim import Observation, Requests
 class Oracle(Policy):
     name = "oracle"
     clairvoyant = True
+    options = (
+        Option("window", int, low=0, high=1440, help="minutes ahead whose requests the auction assigns"),
+        Option("pool_factor", int, low=1, high=100, help="requests in the auction per taxi (the earliest)"),
+    )
 
     def __init__(self, city: City, window: int = 10, pool_factor: int = 3) -> None:
         super().__init__(city)

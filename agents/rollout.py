@@ -64,8 +64,8 @@ import numba
 import numpy as np
 
 from agents import _kernels as K
-from agents.base import EpisodeContext, Policy, register
-from agents.forecast import Forecast, ForecastProvider, make_provider
+from agents.base import EpisodeContext, Option, Policy, register
+from agents.forecast import PROVIDERS, Forecast, ForecastProvider, make_provider
 from agents.greedy import greedy_controls
 from agents.ia import ia_controls
 from city.errors import ConfigError
@@ -386,6 +386,17 @@ class RolloutPolicy(Policy):
     """
 
     defaults: ClassVar[dict[str, Any]] = {}
+    options = (
+        Option("forecast", str, choices=tuple(sorted(PROVIDERS)), help="forecast provider"),
+        Option("model", str, help="trained predictor directory for forecast=model"),
+        Option("horizon", int, low=1, high=240, help="H, minutes of base policy after the decision minute"),
+        Option("samples", int, low=1, high=1_000_000, help="Monte-Carlo samples per agent decision"),
+        Option("base", str, choices=tuple(BASES), help="base policy"),
+        Option("scope", str, choices=SCOPES, help="where future requests are sampled"),
+        Option("ce", str, choices=tuple(CE_MODES), help="certainty equivalence"),
+        Option("seed", int, low=0, help="seed of every decision's random numbers"),
+        Option("prune", int, low=0, words={"auto": "auto", "none": None}, help="pruning radius in hops"),
+    )
 
     def __init__(self, city: City, forecast: str | None = None, model: str | Path | None = None, **planner: Any) -> None:
         super().__init__(city)

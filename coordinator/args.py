@@ -59,11 +59,13 @@ def rollout_options(args: argparse.Namespace, names: list[str]) -> dict[str, dic
     and ``--model`` only to ``surge``, so that ``garces2023`` keeps its
     previous-hour demand (the baseline as the paper ran it).
     """
+    from agents.base import split_policy
+
     shared = {k: v for k, v in (("horizon", args.horizon), ("samples", args.samples)) if v is not None}
     own = {k: v for k, v in (("forecast", args.forecast), ("model", args.model)) if v is not None}
     out = {}
     for label in names:
-        name = label.partition(":")[0].strip()
+        name = split_policy(label)[0]
         if name == "surge" and (shared or own):
             out[label] = {**shared, **own}
         elif name == "garces2023" and shared:

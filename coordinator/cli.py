@@ -44,14 +44,14 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from agents.base import policy_names
+    from agents.base import check_options, parse_policy
     from city.scenario import check_scenario
-    from coordinator.evaluate import EvalConfig, evaluate, parse_policy
+    from coordinator.evaluate import EvalConfig, evaluate
 
     check_scenario(args.scenario, args.data)
-    unknown = [p for p in args.policies if parse_policy(p)[0] not in policy_names()]
-    if unknown:
-        raise SurgeError(f"unknown policy {unknown[0]!r}; choose from {', '.join(policy_names())}")
+    flags = rollout_options(args, args.policies)
+    for label in args.policies:  # every name, option and flag value is checked before any world is built
+        check_options(parse_policy(label)[0], flags.get(label, {}))
     if args.resume and not args.json:
         raise SurgeError("--resume needs --json: the results file to resume from")
     cfg = EvalConfig(
@@ -76,7 +76,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def print_results(doc: dict, *, policy: str | None = None, plot_path: str | None = None) -> dict:
     """The summary table, the paired comparison of ``policy`` (default: the first surge label) and the plot."""
-    from coordinator.evaluate import compare, format_comparison, format_table, parse_policy, plot, summarize
+    from agents.base import split_policy
+    from coordinator.evaluate import compare, format_comparison, format_table, plot, summarize
 
     cfg, c = doc["config"], doc["city"]
     seeds = sorted({e["seed"] for e in doc["episodes"]})
@@ -85,7 +86,7 @@ def print_results(doc: dict, *, policy: str | None = None, plot_path: str | None
     summary = summarize(doc)
     print(format_table(summary))
     labels = list(dict.fromkeys(e["policy"] for e in doc["episodes"]))
-    policy = policy or next((p for p in labels if parse_policy(p)[0] == "surge"), None)
+    policy = policy or next((p for p in labels if split_policy(p)[0] == "surge"), None)
     comparison = compare(doc, policy) if policy else []
     if comparison:
         print()

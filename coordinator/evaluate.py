@@ -25,7 +25,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from agents.base import EpisodeContext, Policy, make_policy
+from agents.base import EpisodeContext, Policy, make_policy, parse_policy
 from city.errors import ConfigError, DataError
 from city.graph import City
 from city.sim import EpisodeResult, FleetSim, Requests
@@ -47,27 +47,6 @@ class EvalConfig:
     policy_options: dict[str, dict] = field(default_factory=dict)
     world_seed: int = 0
     jobs: int = 1
-
-
-def parse_policy(spec: str) -> tuple[str, dict]:
-    """``"name:key=value,key=value"`` → ``(name, options)``; numbers become int or float."""
-    name, _, rest = spec.partition(":")
-    options: dict = {}
-    for item in filter(None, rest.split(",")):
-        key, eq, raw = item.partition("=")
-        if not eq or not key.strip():
-            raise ConfigError(f"policy {spec!r}: option {item!r} is not key=value")
-        options[key.strip()] = _option_value(raw.strip())
-    return name.strip(), options
-
-
-def _option_value(raw: str):
-    for conv in (int, float):
-        try:
-            return conv(raw)
-        except ValueError:
-            pass
-    return raw
 
 
 def initial_positions(city: City, n_taxis: int, seed: int) -> np.ndarray:

@@ -126,8 +126,8 @@ def _fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  #
 
 
 def fleet_config(args) -> FleetConfig:  # noqa: ANN001
+    from agents.base import parse_policy
     from city.scenario import check_scenario
-    from coordinator.evaluate import parse_policy
 
     check_scenario(args.scenario, args.data)
     name, options = parse_policy(args.policy)

@@ -94,3 +94,38 @@ def test_oracle_requires_future() -> None:
     city = line_city(3)
     with pytest.raises(ConfigError, match="future"):
         make_policy("oracle", city).reset(_context(city, 5))
+
+
+def test_option_strings_are_parsed_to_their_declared_types() -> None:
+    from agents.base import parse_policy
+
+    assert parse_policy("surge:horizon=5,samples=20,prune=none,scope=map") == (
+        "surge", {"horizon": 5, "samples": 20, "prune": None, "scope": "map"})
+    assert parse_policy("garces2023:prune=auto,seed=3")[1] == {"prune": "auto", "seed": 3}
+    assert parse_policy("oracle:window=0")[1] == {"window": 0}
+
+
+def test_every_policy_declares_exactly_the_options_its_constructor_takes() -> None:
+    import inspect
+
+    from agents.base import policy_class
+    from agents.rollout import RolloutPolicy
+
+    for name in policy_names():
+        cls = policy_class(name)
+        params = [p for p in inspect.signature(cls.__init__).parameters.values()
+                  if p.name not in ("self", "city") and p.kind is not p.VAR_KEYWORD]
+        if issubclass(cls, RolloutPolicy):
+            params += list(inspect.signature(cls.rollout_config).parameters.values())
+        assert sorted(o.name for o in cls.options) == sorted(p.name for p in params), name
+
+
+@pytest.mark.parametrize(("name", "options", "message"), [
+    ("surge", {"horizon": 0}, "option horizon=0 is not accepted; horizon takes an integer from 1 to 240"),
+    ("surge", {"samples": 2.5}, "option samples=2.5 is not accepted"),
+    ("ia", {"x": 1}, "policy 'ia': unknown option 'x'; it takes no options"),
+])
+def test_make_policy_checks_typed_options(name: str, options: dict, message: str) -> None:
+    city = line_city(4)
+    with pytest.raises(ConfigError, match=message.replace("(", r"\(")):
+        make_policy(name, city, **options)

@@ -260,7 +260,7 @@ def test_forecast_providers() -> None:
         make_provider("crystal-ball")
     with pytest.raises(ConfigError, match="needs a trained predictor"):
         make_policy("surge", city)
-    with pytest.raises(ConfigError, match="unknown base"):
+    with pytest.raises(ConfigError, match="option base='random' is not accepted; base takes one of greedy, ia"):
         make_policy("garces2023", city, base="random")
 
 
