@@ -2,9 +2,8 @@
 
 The street network is read from the node/edge CSV pair OSMnx users export
 (``osmid,x,y`` and ``u,v,length``) or from an OSMnx GraphML file; the taxi
-zones from the WGS84 GeoJSON or the official shapefile (EPSG:2263, inverted
-here with the Lambert conformal conic formulas of Snyder, *Map Projections —
-A Working Manual*, 1987, so no PROJ install is needed).
+zones from the WGS84 GeoJSON or the official shapefile (EPSG:2263, taken to
+lon/lat with pyproj from the ``.prj`` file).
 
 The CSV helpers at the bottom are shared by every real-format reader in
 :mod:`city`: they keep the 1-based line number of each record, so an error
@@ -14,8 +13,6 @@ names the line a user sees in an editor even when quoted fields span lines.
 from __future__ import annotations
 
 import json
-import math
-import re
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -30,7 +27,6 @@ from city.graph import City, largest_scc
 
 #: Two zone polygons closer than this (degrees, about 5 m) count as sharing a border.
 BORDER_TOLERANCE_DEG = 5e-5
-#: Mean Earth radius used for local distance conversions (metres).
 
 
 def load_nyc_city(data_dir: Path, zone_group: str = "manhattan_below_60", zones: list[int] | None = None) -> City:
@@ -268,7 +264,7 @@ def _read_shapefile(path: Path) -> tuple[list[tuple[dict, dict]], Callable[[np.n
     prj = path.with_suffix(".prj")
     if not prj.is_file():
         raise DataError("shapefile has no .prj file; cannot tell its coordinate system", path=path)
-    transform = lcc_inverse_from_prj(prj.read_text(encoding="utf-8", errors="replace"), prj)
+    transform = lonlat_transform_from_prj(prj.read_text(encoding="utf-8", errors="replace"), prj)
     try:
         with shapefile.Reader(str(path)) as reader:
             fields = [f[0] for f in reader.fields[1:]]
@@ -278,60 +274,26 @@ def _read_shapefile(path: Path) -> tuple[list[tuple[dict, dict]], Callable[[np.n
     return features, transform
 
 
-def lcc_inverse_from_prj(wkt: str, path: Path | None = None) -> Callable[[np.ndarray], np.ndarray] | None:
-    """A function mapping projected ``(n, 2)`` coordinates to lon/lat, from ESRI ``.prj`` WKT.
+def lonlat_transform_from_prj(wkt: str, path: Path | None = None) -> Callable[[np.ndarray], np.ndarray] | None:
+    """A function mapping ``(n, 2)`` coordinates of the ``.prj`` WKT's system to lon/lat (WGS84), by pyproj.
 
-    Geographic WKT (``GEOGCS`` only) gives ``None`` (no transform); ``PROJCS``
-    must be a two-standard-parallel Lambert conformal conic, as the TLC file
-    (NAD83 / New York Long Island, US feet). NAD83 is taken as WGS84 (they
-    differ by about a metre).
+    A file already in WGS84 lon/lat gives ``None`` (no transform).
     """
-    if not wkt.lstrip().upper().startswith("PROJCS"):
+    from pyproj import CRS, Transformer
+    from pyproj.exceptions import CRSError
+
+    try:
+        crs = CRS.from_wkt(wkt)
+    except CRSError as exc:
+        raise DataError(f"unreadable coordinate system ({exc})", path=path) from None
+    if crs.equals(CRS.from_epsg(4326), ignore_axis_order=True):
         return None
-    if "lambert_conformal_conic" not in wkt.lower():
-        raise DataError("unsupported projection (only geographic or Lambert conformal conic)", path=path)
+    transformer = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
 
-    def param(name: str) -> float:
-        m = re.search(rf'PARAMETER\["{name}",\s*([-+0-9.eE]+)\]', wkt, flags=re.IGNORECASE)
-        if not m:
-            raise DataError(f"projection lacks parameter {name}", path=path)
-        return float(m.group(1))
+    def to_lonlat(coords: np.ndarray) -> np.ndarray:
+        return np.column_stack(transformer.transform(coords[:, 0], coords[:, 1]))
 
-    sph = re.search(r'SPHEROID\["[^"]*",\s*([0-9.]+),\s*([0-9.]+)\]', wkt)
-    units = re.findall(r'UNIT\["[^"]*",\s*([0-9.eE]+)\]', wkt)
-    if not sph or not units:
-        raise DataError("projection lacks SPHEROID or UNIT", path=path)
-    a, inv_f = float(sph.group(1)), float(sph.group(2))
-    unit = float(units[-1])
-    e = math.sqrt(2 / inv_f - 1 / inv_f**2)
-    lat1, lat2 = math.radians(param("Standard_Parallel_1")), math.radians(param("Standard_Parallel_2"))
-    lat0, lon0 = math.radians(param("Latitude_Of_Origin")), math.radians(param("Central_Meridian"))
-    fe, fn = param("False_Easting") * unit, param("False_Northing") * unit
-
-    def m_(phi: float) -> float:
-        return math.cos(phi) / math.sqrt(1 - (e * math.sin(phi)) ** 2)
-
-    def t_(phi: float) -> float:
-        s = e * math.sin(phi)
-        return math.tan(math.pi / 4 - phi / 2) / ((1 - s) / (1 + s)) ** (e / 2)
-
-    n = (math.log(m_(lat1)) - math.log(m_(lat2))) / (math.log(t_(lat1)) - math.log(t_(lat2)))
-    big_f = m_(lat1) / (n * t_(lat1) ** n)
-    rho0 = a * big_f * t_(lat0) ** n
-
-    def inverse(coords: np.ndarray) -> np.ndarray:
-        x = coords[:, 0] * unit - fe
-        y = rho0 - (coords[:, 1] * unit - fn)
-        rho = np.sign(n) * np.hypot(x, y)
-        t = (rho / (a * big_f)) ** (1 / n)
-        theta = np.arctan2(np.sign(n) * x, np.sign(n) * y)
-        phi = np.pi / 2 - 2 * np.arctan(t)
-        for _ in range(8):  # Snyder eq. 7-9, converges to < 1e-12 rad in a few steps
-            s = e * np.sin(phi)
-            phi = np.pi / 2 - 2 * np.arctan(t * ((1 - s) / (1 + s)) ** (e / 2))
-        return np.column_stack([np.degrees(theta / n + lon0), np.degrees(phi)])
-
-    return inverse
+    return to_lonlat
 
 
 def _choose_zones(zone_dir: Path, zone_group: str, zones: list[int] | None, polygons: dict) -> list[int]:

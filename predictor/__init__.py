@@ -10,7 +10,6 @@ Modules
 -------
 embed       sentence embeddings with an on-disk cache (torch only inside ``Embedder.model``)
 cluster     spectral clustering of review embeddings -> R_w (numpy/scikit-learn)
-holidays    US federal holidays, computed
 features    temporal/weather/sector features and the sector event feature F_s
 dataset     builds the year's training and test arrays from a demand world
 nets        the feed-forward networks (torch)

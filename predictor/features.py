@@ -8,7 +8,7 @@ Base features f (both networks; paper §4.2.1 "temporal and spatial data"):
   one-hot month would leave the test months (Sep–Dec) with untrained weights,
   because the networks train on Jan–Aug only; the cyclic code at least lets
   them interpolate the seasonal trend.
-* US federal holiday flag (1), computed by :mod:`predictor.holidays`
+* US federal holiday flag (1), from :func:`city.calendar.holidays_for`
 * weather: temperature (°F), precipitation (in), wind (mph), z-scored with the
   training months' mean and standard deviation (3)
 * the sector's identity, one-hot (S).  The paper calls weather "spatial"; surge
@@ -45,7 +45,7 @@ from typing import Sequence
 import numpy as np
 
 from predictor.cluster import GAMMA, N_CLUSTERS, Q_MAX, review_representation
-from predictor.holidays import us_federal_holidays
+from city.calendar import holidays_for
 
 N_TEMPORAL = 24 + 7 + 2 + 1
 WEATHER_NAMES = ("temp_f", "precip_in", "wind_mph")
@@ -62,7 +62,7 @@ def temporal_features(when: dt.datetime) -> np.ndarray:
     ang = 2 * np.pi * (when.month - 1) / 12.0
     f[31] = np.sin(ang)
     f[32] = np.cos(ang)
-    f[33] = 1.0 if when.date() in us_federal_holidays(when.year) else 0.0
+    f[33] = 1.0 if when.date() in holidays_for(when.year) else 0.0
     return f
 
 

@@ -99,12 +99,18 @@ def test_cli_import_is_light() -> None:
 
 
 def test_holidays_2022() -> None:
-    from predictor.holidays import us_federal_holidays
+    from city.calendar import holidays_for
+    from city.errors import ConfigError
 
-    h = us_federal_holidays(2022)
+    h = holidays_for(2022)
     for d in (dt.date(2022, 1, 17), dt.date(2022, 5, 30), dt.date(2022, 6, 20), dt.date(2022, 7, 4), dt.date(2022, 9, 5), dt.date(2022, 11, 24), dt.date(2022, 12, 26)):
         assert d in h, d
     assert dt.date(2022, 7, 5) not in h
+    assert dt.date(2022, 2, 15) in holidays_for(2022, "US", "NY")  # Susan B. Anthony Day, New York only
+    with pytest.raises(ConfigError, match="US has no subdivision 'ZZ'"):
+        holidays_for(2022, "US", "ZZ")
+    with pytest.raises(ConfigError, match="unknown country 'XX'"):
+        holidays_for(2022, "XX")
 
 
 def test_embedding_offline_and_cached(cache: Path) -> None:
