@@ -30,7 +30,7 @@ BORDER_TOLERANCE_DEG = 5e-5
 
 
 def load_nyc_city(data_dir: Path, zone_group: str = "manhattan_below_60", zones: list[int] | None = None) -> City:
-    """Load the NYC street graph clipped to a group of TLC taxi zones.
+    """Load the NYC street graph clipped to a group of TLC taxi zones, from a folder laid out like ``shared/data``.
 
     Parameters
     ----------
@@ -44,11 +44,7 @@ def load_nyc_city(data_dir: Path, zone_group: str = "manhattan_below_60", zones:
     Returns
     -------
     City
-        Sectors are the chosen zones in LocationID order; ``xy`` is lon/lat
-        (``crs="lonlat"``). ``info["dropped"]`` counts the nodes outside the
-        zones, the edges losing an end, and the nodes and edges outside the
-        largest strongly connected component; ``info["warnings"]`` holds the
-        file problems that were skipped.
+        As :func:`build_zone_map`.
 
     Raises
     ------
@@ -63,16 +59,57 @@ def load_nyc_city(data_dir: Path, zone_group: str = "manhattan_below_60", zones:
     if (root / "nyc").is_dir():
         root = root / "nyc"
     street_dir, zone_dir = root / "street_network", root / "taxi_zones"
-
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        osmid, xy, u, v, length, street_src = _read_streets(street_dir)
+        streets = _read_streets(street_dir)
     notes = [str(w.message) for w in caught]
     for note in notes:
         warnings.warn(note, stacklevel=2)
+    zone_file = _zone_file(zone_dir)
+    polygons, zone_names = read_zone_file(zone_file)
+    groups = zone_dir / "taxi_zone_groups.csv"
+    if zones is not None:
+        ids = sorted({int(z) for z in zones})
+    else:
+        ids = zone_ids_in_group(groups, "group", zone_group)
+    check_zone_polygons(ids, polygons, zone_names, zone_file, known=zone_names_in_groups(groups) if groups.is_file() else {})
+    return build_zone_map("nyc", streets, polygons, zone_names, ids, zone_src=zone_file.name, notes=notes,
+                          info={"zone_group": None if zones is not None else zone_group})
 
-    polygons, zone_names, zone_src = read_taxi_zones(zone_dir)
-    ids = _choose_zones(zone_dir, zone_group, zones, polygons)
+
+def build_zone_map(
+    name: str,
+    streets: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, str],
+    polygons: dict[int, shapely.Geometry],
+    zone_names: dict[int, str],
+    ids: list[int],
+    *,
+    zone_src: str,
+    notes: list[str] | None = None,
+    info: dict | None = None,
+) -> City:
+    """A street graph in lon/lat clipped to the zones ``ids``, one sector per zone.
+
+    Parameters
+    ----------
+    streets : tuple
+        ``(osmid, xy, u, v, length, source)`` as :func:`read_street_csv` and
+        :func:`read_graphml` return, ``xy`` in lon/lat.
+    polygons, zone_names : dict
+        Zone polygons in lon/lat and names, by zone id (:func:`read_zone_file`).
+    ids : list of int
+        The zones to keep, each with a polygon (:func:`check_zone_polygons`).
+
+    Returns
+    -------
+    City
+        Sectors are the zones in ``ids`` order; ``xy`` is lon/lat
+        (``crs="lonlat"``). ``info["dropped"]`` counts the nodes outside the
+        zones, the edges losing an end, and the nodes and edges outside the
+        largest strongly connected component; ``info["warnings"]`` holds the
+        file problems that were skipped.
+    """
+    osmid, xy, u, v, length, street_src = streets
     names = [zone_names[i] for i in ids]
     polys = [polygons[i] for i in ids]
 
@@ -84,6 +121,9 @@ def load_nyc_city(data_dir: Path, zone_group: str = "manhattan_below_60", zones:
     keep_edge = inside[u] & inside[v]
     new_index = np.cumsum(inside) - 1
     n_in = int(inside.sum())
+    if n_in == 0:
+        raise ConfigError(f"no intersection of {street_src} lies inside the chosen zones of {zone_src}; "
+                          "are the street coordinates lon/lat (or is the streets crs set)?")
     u1, v1, len1 = new_index[u[keep_edge]], new_index[v[keep_edge]], length[keep_edge]
     scc = largest_scc(n_in, u1, v1)
     keep_scc = scc[u1] & scc[v1]
@@ -94,6 +134,19 @@ def load_nyc_city(data_dir: Path, zone_group: str = "manhattan_below_60", zones:
         border[k] = shapely.dwithin(poly, np.asarray(polys, dtype=object), BORDER_TOLERANCE_DEG)
 
     nodes_kept = np.flatnonzero(inside)[scc]
+    # A zone none of whose intersections is in the component (an island, a park) has no street to serve.
+    present = np.bincount(node_zone[nodes_kept], minlength=len(ids)) > 0
+    empty = [ids[k] for k in np.flatnonzero(~present)]
+    notes = list(notes or [])
+    if empty:
+        notes.append(f"zone(s) {', '.join(map(str, empty))} of {zone_src} hold no intersection of the street network "
+                     "(after its largest strongly connected component) and are not sectors")
+        warnings.warn(notes[-1], stacklevel=2)
+        renumber = np.cumsum(present) - 1
+        node_zone = np.where(node_zone >= 0, renumber[np.maximum(node_zone, 0)], -1)
+        ids = [z for z, keep in zip(ids, present) if keep]
+        names = [n for n, keep in zip(names, present) if keep]
+        border = border[np.ix_(present, present)]
     dropped = {
         "nodes_outside_zones": int(len(xy) - n_in),
         "edges_outside_zones": int(len(u) - keep_edge.sum()),
@@ -102,14 +155,15 @@ def load_nyc_city(data_dir: Path, zone_group: str = "manhattan_below_60", zones:
     }
     info = {
         "source": {"streets": street_src, "zones": zone_src},
-        "zone_group": None if zones is not None else zone_group,
+        **(info or {}),
         "nodes_read": int(len(xy)),
         "edges_read": int(len(u)),
         "dropped": dropped,
+        "zones_without_intersections": empty,
         "warnings": notes,
     }
     return City.build(
-        "nyc",
+        name,
         xy[nodes_kept],
         final_index[u1[keep_scc]],
         final_index[v1[keep_scc]],
@@ -215,46 +269,62 @@ def read_graphml(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
 
 # -------------------------------------------------------------------- zones
 def read_taxi_zones(zone_dir: Path) -> tuple[dict[int, shapely.Geometry], dict[int, str], str]:
-    """TLC taxi-zone polygons in lon/lat, by LocationID, and their names.
+    """TLC taxi-zone polygons in lon/lat, by LocationID, and their names, from the folder's zone file.
 
     Prefers ``*.geojson``; otherwise reads ``*.shp`` with its ``.prj``.
-    Features sharing a LocationID (zones split in several polygons) are merged.
     """
+    path = _zone_file(zone_dir)
+    polygons, names = read_zone_file(path)
+    return polygons, names, path.name
+
+
+def _zone_file(zone_dir: Path) -> Path:
     if not zone_dir.is_dir():
         raise DataError("taxi zone folder not found", path=zone_dir)
-    geojson = sorted(zone_dir.glob("*.geojson"))
-    shp = sorted(zone_dir.glob("*.shp"))
-    if geojson:
-        path = geojson[0]
+    found = sorted(zone_dir.glob("*.geojson")) or sorted(zone_dir.glob("*.shp"))
+    if not found:
+        raise DataError("no taxi_zones *.geojson or *.shp file", path=zone_dir)
+    return found[0]
+
+
+def read_zone_file(path: Path, id_field: str = "LocationID", name_field: str = "zone") -> tuple[dict[int, shapely.Geometry], dict[int, str]]:
+    """Zone polygons in lon/lat and names, by zone id, from a GeoJSON file (WGS84) or a shapefile with its ``.prj``.
+
+    Field names match case-insensitively.  Features sharing an id (a zone in
+    several polygons) are merged.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError("zone file not found", path=path)
+    if path.suffix.lower() == ".shp":
+        features, transform = _read_shapefile(path)
+    else:
         try:
             doc = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError) as exc:
             raise DataError(f"not a readable GeoJSON file ({exc})", path=path) from exc
         features = [(f.get("properties") or {}, f.get("geometry")) for f in doc.get("features", [])]
         transform = None
-    elif shp:
-        path = shp[0]
-        features, transform = _read_shapefile(path)
-    else:
-        raise DataError("no taxi_zones *.geojson or *.shp file", path=zone_dir)
-
+    id_key, name_key = id_field.lower(), name_field.lower()
     parts: dict[int, list[shapely.Geometry]] = {}
     names: dict[int, str] = {}
     for k, (props, geom) in enumerate(features, start=1):
         props = {key.lower(): val for key, val in props.items()}
         try:
-            zone_id = int(props["locationid"])
+            zone_id = int(props[id_key])
             poly = shape(geom)
         except (KeyError, TypeError, ValueError, AttributeError, shapely.errors.GEOSException) as exc:
-            raise DataError(f"feature {k}: needs a LocationID and a polygon ({exc})", path=path) from None
+            raise DataError(f"feature {k}: needs a {id_field!r} field and a polygon ({exc})", path=path) from None
         if transform is not None:
             poly = shapely.transform(poly, transform)
         parts.setdefault(zone_id, []).append(shapely.make_valid(poly))
-        names.setdefault(zone_id, str(props.get("zone", zone_id)))
+        names.setdefault(zone_id, str(props.get(name_key, zone_id)))
+    if not parts:
+        raise DataError("no zone features", path=path)
     polygons = {zid: shapely.union_all(p) if len(p) > 1 else p[0] for zid, p in parts.items()}
     for poly in polygons.values():
         shapely.prepare(poly)
-    return polygons, names, path.name
+    return polygons, names
 
 
 def _read_shapefile(path: Path) -> tuple[list[tuple[dict, dict]], Callable[[np.ndarray], np.ndarray] | None]:
@@ -296,20 +366,45 @@ def lonlat_transform_from_prj(wkt: str, path: Path | None = None) -> Callable[[n
     return to_lonlat
 
 
-def _choose_zones(zone_dir: Path, zone_group: str, zones: list[int] | None, polygons: dict) -> list[int]:
-    """The LocationIDs to keep, sorted: the explicit list or the named group."""
-    if zones is not None:
-        chosen = sorted({int(z) for z in zones})
-    else:
-        path = zone_dir / "taxi_zone_groups.csv"
-        table = read_csv(path, ["LocationID", "Zone", "Borough", "group"], header=False)
-        groups = np.array(table.col("group"))
-        chosen = sorted(set(table.ints("LocationID")[groups == zone_group].tolist()))
-        if not chosen:
-            raise ConfigError(f"unknown zone group {zone_group!r} in {path} (groups: {', '.join(sorted(set(groups)))})")
-    unknown = [z for z in chosen if z not in polygons]
-    if unknown:
-        raise ConfigError(f"taxi zone(s) {unknown} not found in {zone_dir}")
+GROUP_COLUMNS = ["LocationID", "Zone", "Borough", "group"]
+
+
+def zone_ids_in_group(path: Path, column: str, value: str) -> list[int]:
+    """The zone ids whose ``column`` (``group`` or ``Borough``) is ``value`` in a TLC-style groups CSV.
+
+    The file has no header: ``LocationID,Zone,Borough,group`` (``taxi_zone_groups.csv``).
+    """
+    table = read_csv(Path(path), GROUP_COLUMNS, header=False)
+    values = np.array(table.col(column))
+    chosen = sorted(set(table.ints("LocationID")[values == value].tolist()))
     if not chosen:
-        raise ConfigError("no taxi zones chosen")
+        raise ConfigError(f"unknown zone {column.lower()} {value!r} in {path} ({column.lower()}s: {', '.join(sorted(set(values)))})")
     return chosen
+
+
+def zone_names_in_groups(path: Path) -> dict[int, str]:
+    """Zone id → name from a TLC-style groups CSV (the names tell which zones share a polygon)."""
+    table = read_csv(Path(path), GROUP_COLUMNS, header=False)
+    return dict(zip(table.ints("LocationID").tolist(), table.col("Zone")))
+
+
+def check_zone_polygons(ids: list[int], polygons: dict, names: dict[int, str], path: Path, *, known: dict[int, str] | None = None) -> None:
+    """Every zone of ``ids`` must have a polygon of its own; else one line says which, and why when it can tell.
+
+    ``known`` (zone id → name, from a groups or lookup table) lets the message
+    say when a missing zone's name is that of a zone whose polygon covers it
+    (TLC zone 103's polygon covers 103–105).
+    """
+    if not ids:
+        raise ConfigError("no zones chosen")
+    missing = [z for z in ids if z not in polygons]
+    if not missing:
+        return
+    by_name: dict[str, int] = {}
+    for zid, name in names.items():
+        by_name.setdefault(name, zid)
+    shared = {z: by_name[known[z]] for z in missing if known and known.get(z) in by_name}
+    hint = "".join(f"; zone {owner}'s polygon covers {z} (same name {known[z]!r})" for z, owner in shared.items()) if known else ""
+    raise ConfigError(
+        f"{path}: zone(s) {', '.join(map(str, missing))} have no polygon of their own{hint}; "
+        "leave them out (zones.missing = \"skip\" in a scenario file, or list the ids)")

@@ -84,7 +84,7 @@ _HOSPITAL = re.compile(r"\b(HOSPITAL|HOSP|MEDICAL CENTER)\b")
 _POINT = re.compile(r"^\s*POINT\s*\(\s*(\S+)\s+(\S+)\s*\)\s*$", re.IGNORECASE)
 
 
-def read_poi_csv(path: Path | str, borough: int | None = 1) -> Pois:
+def read_poi_csv(path: Path | str, borough: int | None = 1, types: dict[str, str] | None = None) -> Pois:
     """Read points of interest as lon/lat points with a locale type.
 
     Two schemas are accepted. The NYC Planning "Points of Interest" export
@@ -104,7 +104,8 @@ def read_poi_csv(path: Path | str, borough: int | None = 1) -> Pois:
     counts understate the real density; they still rank areas.
 
     The generic schema is ``lon,lat,kind[,name]`` (or ``x,y,kind[,name]`` in
-    the city's coordinates) with ``kind`` a locale type or ``other``.
+    the city's coordinates) with ``kind`` a locale type or ``other``, or any
+    of the keys of ``types``, which maps the file's kinds to those.
 
     Raises
     ------
@@ -143,6 +144,11 @@ def read_poi_csv(path: Path | str, borough: int | None = 1) -> Pois:
     table.require([xcol, ycol, "kind"])
     kind = np.array(table.col("kind"), dtype=object)
     allowed = set(LOCALE_TYPES) | {"other"}
+    if types is not None:
+        bad = [i for i, k in enumerate(kind) if k not in types]
+        if bad:
+            raise table.error(bad[0], f"column 'kind': {kind[bad[0]]!r} is not in the type mapping ({', '.join(sorted(types))})")
+        kind = np.array([types[k] for k in kind], dtype=object)
     bad = [i for i, k in enumerate(kind) if k not in allowed]
     if bad:
         raise table.error(bad[0], f"column 'kind': {kind[bad[0]]!r} is not one of {', '.join(sorted(allowed))}")

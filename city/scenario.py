@@ -1,27 +1,43 @@
-"""Scenarios by name: the city plus its demand world, built once and cached on disk."""
+"""Scenarios by name or file: the city plus its demand world, the city built once and cached on disk.
+
+``synthetic`` is embedded.  Every other scenario is a scenario file
+(:mod:`city.scenario_file`): ``nyc`` and ``manhattan`` are files shipped in
+``city/scenarios/`` that point into a data directory (``--data``), and any
+``PATH.toml`` is a user's own city.
+"""
 
 from __future__ import annotations
 
 import hashlib
 import os
+import warnings
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
+
+import numpy as np
 
 from city.errors import ConfigError
 from city.graph import City
+from city.scenario_file import ScenarioSpec, read_scenario_file
 
-SCENARIOS = ("synthetic", "nyc")
-SCENARIO_HELP = "synthetic (embedded) or nyc (needs --data)"
+#: Scenario files shipped in the package, by name.
+SHIPPED = ("nyc", "manhattan")
+SCENARIOS = ("synthetic", *SHIPPED)
+SCENARIO_HELP = "synthetic (embedded), nyc or manhattan (shipped scenario files, need --data), or a scenario .toml file"
 #: Bump when a change to a city builder changes its output, so caches rebuild.
-CITY_VERSION = "1"
+CITY_VERSION = "2"
 
 
 @dataclass(frozen=True)
 class Scenario:
+    """A city, its demand world, and the scenario file it came from (``None`` for ``synthetic``)."""
+
     name: str
     city: City
     world: object
     data_dir: Path | None
+    spec: ScenarioSpec | None = None
 
 
 def cache_dir() -> Path:
@@ -31,45 +47,56 @@ def cache_dir() -> Path:
     return path
 
 
+def scenario_path(name: str) -> Path | None:
+    """The scenario file ``name`` stands for: a shipped one, a ``.toml`` path, or ``None`` for ``synthetic``."""
+    if name == "synthetic":
+        return None
+    if name in SHIPPED:
+        return Path(str(resources.files("city") / "scenarios" / f"{name}.toml"))
+    if name.endswith(".toml") or os.sep in name or Path(name).is_file():
+        return Path(name)
+    raise ConfigError(f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)} or give a scenario .toml file")
+
+
+def scenario_spec(name: str, data_dir: Path | str | None = None) -> ScenarioSpec | None:
+    """The parsed, checked scenario file of ``name`` (``None`` for ``synthetic``); one-line errors."""
+    path = scenario_path(name)
+    if path is None:
+        return None
+    if name in SHIPPED and data_dir is None:
+        raise ConfigError(f"scenario {name!r} needs --data DIR (a directory laid out like shared/data)")
+    if data_dir is not None and not Path(data_dir).is_dir():
+        raise ConfigError(f"data directory {data_dir} does not exist")
+    return read_scenario_file(path, data_dir)
+
+
 def check_scenario(name: str, data_dir: Path | str | None) -> Path | None:
-    """Validate a scenario name and its data directory; raise :class:`ConfigError` with one line."""
-    if name not in SCENARIOS:
-        raise ConfigError(f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)}")
-    if name == "nyc":
-        if data_dir is None:
-            raise ConfigError("scenario 'nyc' needs --data DIR (a directory laid out like shared/data)")
-        data_dir = Path(data_dir)
-        if not data_dir.is_dir():
-            raise ConfigError(f"data directory {data_dir} does not exist")
-        return data_dir
+    """Validate a scenario (its whole file, if any) and its data directory; the data directory it uses."""
+    spec = scenario_spec(name, data_dir)
+    if spec is not None:
+        return spec.data_dir
     return Path(data_dir) if data_dir is not None else None
-
-
-def _nyc_inputs(data_dir: Path) -> list[Path]:
-    return sorted(p for p in (data_dir / "nyc").rglob("*") if p.is_file() and p.suffix in {".csv", ".geojson", ".shp", ".graphml"})
 
 
 def load_city(name: str, data_dir: Path | str | None = None, *, use_cache: bool = True) -> City:
     """Build (or load from cache) the street graph of a scenario."""
-    data_dir = check_scenario(name, data_dir)
-    key = hashlib.sha256(f"{name}|{CITY_VERSION}".encode())
-    if name == "nyc":
-        assert data_dir is not None
-        for p in _nyc_inputs(data_dir):
+    spec = scenario_spec(name, data_dir)
+    key = hashlib.sha256(f"{name if spec is None else spec.name}|{CITY_VERSION}".encode())
+    if spec is not None:
+        key.update(repr((spec.streets.crs, spec.zones.id_field, spec.zones.name_field, spec.zones.select, spec.zones.missing)).encode())
+        for p in spec.city_inputs():
             st = p.stat()
             key.update(f"{p.resolve()}|{st.st_size}|{st.st_mtime_ns}".encode())
-    path = cache_dir() / f"city-{name}-{key.hexdigest()[:16]}.npz"
+    label = "synthetic" if spec is None else spec.name
+    path = cache_dir() / f"city-{label}-{key.hexdigest()[:16]}.npz"
     if use_cache and path.exists():
         return City.load(path)
-    if name == "synthetic":
+    if spec is None:
         from city.synthetic import synthetic_city
 
         city = synthetic_city()
     else:
-        from city.nyc import load_nyc_city
-
-        assert data_dir is not None
-        city = load_nyc_city(data_dir)
+        city = build_city(spec)
     if use_cache:
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         city.save(tmp)
@@ -77,40 +104,128 @@ def load_city(name: str, data_dir: Path | str | None = None, *, use_cache: bool 
     return city
 
 
-def trip_files(data_dir: Path) -> list[Path]:
-    """A user's TLC High-Volume FHV parquet files, if any, under ``nyc/trips``."""
-    return sorted((data_dir / "nyc" / "trips").glob("fhvhv_tripdata_*.parquet"))
+def build_city(spec: ScenarioSpec) -> City:
+    """The street graph of a scenario file: its streets clipped to its zones, one sector per zone."""
+    from city.nyc import build_zone_map, check_zone_polygons, read_zone_file, zone_ids_in_group, zone_names_in_groups
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        streets = read_streets(spec)
+    notes = [str(w.message) for w in caught]
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
+    z = spec.zones
+    polygons, names = read_zone_file(z.file, z.id_field, z.name_field)
+    how = z.select[0]
+    if how == "all":
+        ids = sorted(polygons)
+    elif how == "ids":
+        ids = list(z.select[1])
+    else:
+        assert z.groups is not None
+        ids = zone_ids_in_group(z.groups, "group" if how == "group" else "Borough", z.select[1])
+    known = zone_names_in_groups(z.groups) if z.groups is not None else {}
+    if z.missing == "skip":
+        skipped = [i for i in ids if i not in polygons]
+        if skipped:
+            note = f"{spec.path}: zones.missing = \"skip\": left out zone(s) {', '.join(map(str, skipped))}, which have no polygon in {z.file.name}"
+            notes.append(note)
+            warnings.warn(note, stacklevel=2)
+        ids = [i for i in ids if i in polygons]
+    check_zone_polygons(ids, polygons, names, z.file, known=known)
+    return build_zone_map(spec.name, streets, polygons, names, ids, zone_src=z.file.name, notes=notes,
+                          info={"scenario_file": str(spec.path), "zones": list(z.select[:1]) + [str(v) for v in z.select[1:]]})
+
+
+def read_streets(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
+    """``(osmid, xy, u, v, length, source)`` of the scenario's street network, ``xy`` taken to lon/lat by pyproj."""
+    from city.nyc import read_graphml, read_street_csv
+
+    s = spec.streets
+    if s.graphml is not None:
+        osmid, xy, u, v, length = read_graphml(s.graphml)
+        source = s.graphml.name
+    else:
+        assert s.nodes is not None and s.edges is not None
+        osmid, xy, u, v, length = read_street_csv(s.nodes, s.edges)
+        source = s.nodes.name
+    from pyproj import CRS, Transformer
+
+    crs = CRS.from_user_input(s.crs)
+    if not crs.equals(CRS.from_epsg(4326), ignore_axis_order=True):
+        to_lonlat = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+        xy = np.column_stack(to_lonlat.transform(xy[:, 0], xy[:, 1]))
+    return osmid, xy, u, v, length, source
 
 
 def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 2022, seed: int = 0) -> Scenario:
     """The city and its demand world.
 
-    ``synthetic`` generates everything.  ``nyc`` reads the real map, LGA hourly
-    weather and points of interest from ``data_dir``; its demand is replayed
-    from TLC HV-FHV trip records when ``nyc/trips/fhvhv_tripdata_*.parquet``
-    files are there (with the permitted-events calendar), and synthesised on
-    top of the real map otherwise.
+    ``synthetic`` generates everything.  A scenario file's world replays its
+    trip records (``[trips] kind = "fhvhv"``) with its events when it has
+    them, and is synthesised on the real map otherwise; weather and points of
+    interest come from its files when it names them.
     """
-    data_dir = check_scenario(name, data_dir)
+    spec = scenario_spec(name, data_dir)
     city = load_city(name, data_dir)
+    from city.demand import synthetic_world
+
+    if spec is None:
+        return Scenario(name=name, city=city, world=synthetic_world(city, year=year, seed=seed), data_dir=check_scenario(name, data_dir))
+    return Scenario(name=name, city=city, world=build_world(spec, city, year=year, seed=seed), data_dir=spec.data_dir, spec=spec)
+
+
+def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int = 0) -> object:
+    """The demand world of a scenario file on its city.
+
+    Raises
+    ------
+    ConfigError
+        ``[trips] kind = "zone-od"``: parsed and checked, but this build has no
+        demand world for a zone-OD profile.
+    """
     from city.demand import RecordedWorld, synthetic_world
 
-    if name == "synthetic":
-        return Scenario(name=name, city=city, world=synthetic_world(city, year=year, seed=seed), data_dir=data_dir)
-    from city.poi import read_poi_csv
-    from city.weather import read_weather_csv
+    weather = pois = None
+    if spec.weather is not None:
+        from city.weather import read_weather_csv
 
-    assert data_dir is not None
-    weather = read_weather_csv(data_dir / "nyc" / "weather" / "airports_hourly_2022.csv", station="LGA", year=year)
-    pois = read_poi_csv(data_dir / "nyc" / "poi" / "nyc_points_of_interest.csv")
-    trips = trip_files(data_dir)
-    if trips:
-        from city.events import read_permitted_events
+        w = spec.weather
+        weather = read_weather_csv(w.file, station=w.station or "LGA", year=year, columns=w.columns)
+    if spec.pois is not None:
+        from city.poi import read_poi_csv
+
+        pois = read_poi_csv(spec.pois.file, borough=spec.pois.borough, types=spec.pois.types)
+    trips = spec.trips
+    if trips is not None and trips.kind == "zone-od":
+        raise ConfigError(f"{spec.path}: trips.kind: \"zone-od\" profiles have no demand world in this build; "
+                          "use kind = \"fhvhv\" or leave [trips] out")
+    if trips is not None and trips.files:
         from city.trips import read_fhvhv
 
-        calendar = data_dir / "nyc" / "events" / "nyc_permitted_events_2022.csv"
-        events = read_permitted_events(calendar, city) if calendar.exists() else []
-        world = RecordedWorld(city, read_fhvhv(trips, city), year=year, seed=seed, events=events, weather=weather, pois=pois)
-    else:
-        world = synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois)
-    return Scenario(name=name, city=city, world=world, data_dir=data_dir)
+        table = read_fhvhv(list(trips.files), city)
+        if trips.share < 1.0:
+            table = sample_trips(table, trips.share, seed)
+        return RecordedWorld(city, table, year=year, seed=seed, events=read_scenario_events(spec, city), weather=weather, pois=pois)
+    return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois)
+
+
+def sample_trips(table, share: float, seed: int):  # noqa: ANN001, ANN201
+    """A seeded ``share`` of the trips of a :class:`city.trips.TripTable` (each kept with probability ``share``)."""
+    from city.trips import TripTable
+
+    keep = np.random.default_rng([seed, 14]).random(len(table)) < share
+    return TripTable(request_time=table.request_time[keep], pickup_sector=table.pickup_sector[keep],
+                     dropoff_sector=table.dropoff_sector[keep], n_read=table.n_read, n_dropped=table.n_dropped + int((~keep).sum()))
+
+
+def read_scenario_events(spec: ScenarioSpec, city: City) -> list:
+    """The events of a scenario file placed on ``city`` (an empty list without ``[events]``)."""
+    ev = spec.events
+    if ev is None:
+        return []
+    from city.events import read_events, read_permitted_events
+
+    if ev.kind == "permitted":
+        return read_permitted_events(ev.file, city, borough=ev.borough)
+    return read_events(ev.file, city, ev.reviews, tz=spec.timezone)

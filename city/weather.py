@@ -40,14 +40,16 @@ AIRPORT_COLUMNS: dict[str, str] = {"temp_f": "temp", "precip_in": "precip", "win
 GENERIC_COLUMNS: tuple[str, ...] = ("time", "temp_f", "precip_in", "wind_mph")
 
 
-def read_weather_csv(path: Path | str, station: str = "LGA", year: int = 2022) -> HourlyWeather:
+def read_weather_csv(path: Path | str, station: str = "LGA", year: int = 2022, columns: dict[str, str] | None = None) -> HourlyWeather:
     """Read hourly weather for one local year from a CSV file.
 
     Two schemas are accepted: the hourly airport table (``origin, temp,
     precip, wind_speed, time_local_ny``, e.g. ``airports_hourly_2022.csv``),
     filtered to ``station``; or a generic ``time, temp_f, precip_in,
-    wind_mph`` table in local time. A trailing UTC offset on a time is
-    ignored: the wall-clock time as written is the local hour.
+    wind_mph`` table in local time, whose column names ``columns`` may map
+    (``{"time": "datetime", "temp_f": "temperature", ...}``). A trailing UTC
+    offset on a time is ignored: the wall-clock time as written is the local
+    hour.
 
     Clock changes: the hour skipped in spring (02:00) is filled with the
     previous hour's values; the hour repeated in autumn (01:00) is the mean of
@@ -65,7 +67,7 @@ def read_weather_csv(path: Path | str, station: str = "LGA", year: int = 2022) -
 
     path = Path(path)
     table = read_csv(path, [])
-    if table.has("origin"):
+    if table.has("origin") and columns is None:
         table.require(["time_local_ny", *AIRPORT_COLUMNS.values()])
         at_station = np.array(table.col("origin")) == station
         if not at_station.any():
@@ -74,8 +76,9 @@ def read_weather_csv(path: Path | str, station: str = "LGA", year: int = 2022) -
         table = table.subset(at_station)
         time_col, value_cols = "time_local_ny", AIRPORT_COLUMNS
     else:
-        table.require(GENERIC_COLUMNS)
-        time_col, value_cols = "time", {c: c for c in GENERIC_COLUMNS[1:]}
+        names = {c: (columns or {}).get(c, c) for c in GENERIC_COLUMNS}
+        table.require(list(names.values()))
+        time_col, value_cols = names["time"], {c: names[c] for c in GENERIC_COLUMNS[1:]}
 
     when = parse_times(table, time_col).astype("datetime64[h]")
     idx = (when - np.datetime64(dt.datetime(year, 1, 1), "h")).astype(np.int64)
