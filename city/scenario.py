@@ -31,13 +31,18 @@ CITY_VERSION = "2"
 
 @dataclass(frozen=True)
 class Scenario:
-    """A city, its demand world, and the scenario file it came from (``None`` for ``synthetic``)."""
+    """A city, its demand world, and the scenario file it came from (``None`` for ``synthetic``).
+
+    ``schedules`` are the file's occupancy schedules (the shape of
+    :data:`city.occupancy.SCHEDULES`), ``None`` for the built-in ones.
+    """
 
     name: str
     city: City
     world: object
     data_dir: Path | None
     spec: ScenarioSpec | None = None
+    schedules: dict | None = None
 
 
 def cache_dir() -> Path:
@@ -172,7 +177,13 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
 
     if spec is None:
         return Scenario(name=name, city=city, world=synthetic_world(city, year=year, seed=seed), data_dir=check_scenario(name, data_dir))
-    return Scenario(name=name, city=city, world=build_world(spec, city, year=year, seed=seed), data_dir=spec.data_dir, spec=spec)
+    schedules = None
+    if spec.occupancy is not None:
+        from city.occupancy import read_occupancy_csv
+
+        schedules = read_occupancy_csv(spec.occupancy)
+    return Scenario(name=name, city=city, world=build_world(spec, city, year=year, seed=seed), data_dir=spec.data_dir,
+                    spec=spec, schedules=schedules)
 
 
 def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int = 0) -> object:

@@ -140,6 +140,7 @@ def test_invented_city_is_built_from_its_scenario_file(invented: Path) -> None:
     assert [ev.title for ev in world.events] == ["Quarter fair"] and len(world.events[0].reviews) == 2
     assert sorted(world.pois.kind.tolist()) == ["hospital", "hotel", "other", "restaurant", "retail"]
     assert scen.spec is not None and scen.spec.holidays == {"country": "US", "subdiv": "NY"}
+    assert scen.schedules is not None and scen.schedules["hotel"]["sunday"][12] == 0.8
 
 
 def test_surge_evaluate_runs_on_the_invented_city(invented: Path, capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
