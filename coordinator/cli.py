@@ -37,6 +37,8 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--samples", type=positive, default=None, help="rollout Monte-Carlo samples")
     p.add_argument("--world-seed", type=int, default=0, help="seed of the synthetic demand world")
     p.add_argument("--jobs", type=positive, default=1, help="worker processes")
+    p.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="run the instances on the Dask scheduler at ADDRESS (tcp://host:8786) instead; needs surge[cluster]")
     p.add_argument("--json", default=None, help="write surge.results/1 JSON here, updated after every instance")
     p.add_argument("--plot", default=None, help="write a PNG bar chart of total cost per hour and policy here")
     p.add_argument("--resume", action="store_true", help="keep the instances already in --json and run only the rest")
@@ -52,6 +54,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     flags = rollout_options(args, args.policies)
     for label in args.policies:  # every name, option and flag value is checked before any world is built
         check_options(parse_policy(label)[0], flags.get(label, {}))
+    if args.cluster and args.jobs > 1:
+        raise SurgeError("--cluster and --jobs are exclusive: the cluster's workers run the instances")
     if args.resume and not args.json:
         raise SurgeError("--resume needs --json: the results file to resume from")
     cfg = EvalConfig(
@@ -66,6 +70,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         policy_options=rollout_options(args, args.policies),
         world_seed=args.world_seed,
         jobs=args.jobs,
+        cluster=args.cluster,
     )
     doc = evaluate(cfg, checkpoint=args.json, resume=args.resume)
     if args.json:

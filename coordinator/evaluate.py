@@ -14,6 +14,7 @@ as soon as it ends.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import json
 import signal
@@ -21,7 +22,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -47,6 +48,7 @@ class EvalConfig:
     policy_options: dict[str, dict] = field(default_factory=dict)
     world_seed: int = 0
     jobs: int = 1
+    cluster: str | None = None
 
 
 def initial_positions(city: City, n_taxis: int, seed: int) -> np.ndarray:
@@ -143,7 +145,7 @@ def _scenario_cache(cfg: EvalConfig):
     return _SCENARIOS[key]
 
 
-_RESUME_FREE = ("seeds", "jobs")
+_RESUME_FREE = ("seeds", "jobs", "cluster")
 
 
 _EPISODE_FIELDS = ("hour", "seed", "policy", "oracle_cost", *METRICS)
@@ -227,7 +229,21 @@ def evaluate(
         costs = " ".join(f"{r['policy']}={r['total_cost']}" for r in rows)
         progress(f"[{k}/{len(tasks)}] hour {head['hour']} seed {head['seed']}: {costs} ({time.perf_counter() - t0:.1f} s)")
 
-    if cfg.jobs > 1:
+    with contextlib.closing(run_instances(cfg, tasks)) as results:  # closed at once on any error: workers stop
+        for k, rows in enumerate(results, 1):
+            report(k, rows)
+    return document()
+
+
+def run_instances(cfg: EvalConfig, tasks: list[tuple[int, int]]) -> Iterator[list[dict]]:
+    """The rows of each ``(hour, seed)`` instance, in task order: in this process, in a pool of
+    ``cfg.jobs`` worker processes, or on the Dask cluster at ``cfg.cluster``."""
+    work = [(cfg, h, s) for h, s in tasks]
+    if cfg.cluster:
+        from coordinator.cluster import run_on_cluster
+
+        yield from run_on_cluster(cfg.cluster, _instance_task, work)
+    elif cfg.jobs > 1:
         import multiprocessing as mp
         import os
 
@@ -238,12 +254,9 @@ def evaluate(
         # instead of waiting for their instances or leaving them orphaned. Workers ignore
         # SIGINT so that Ctrl-C reaches only this process, which then stops them.
         with mp.get_context("spawn").Pool(cfg.jobs, initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN)) as pool:
-            for k, rows in enumerate(pool.imap(_instance_task, [(cfg, h, s) for h, s in tasks]), 1):
-                report(k, rows)
+            yield from pool.imap(_instance_task, work)
     else:
-        for k, (h, s) in enumerate(tasks, 1):
-            report(k, _instance(cfg, h, s))
-    return document()
+        yield from map(_instance_task, work)
 
 
 def summarize(doc: dict) -> list[dict]:
