@@ -39,7 +39,8 @@ class Option:
 
     ``kind`` is ``int``, ``float`` or ``str``; ``low``/``high`` bound numbers
     (inclusive); ``choices`` lists the accepted strings; ``words`` maps
-    accepted words (``auto``, ``none``) to the values they stand for.
+    accepted words (``auto``, ``none``) to the values they stand for; ``noun``
+    says what a free text is (``a directory``).
     """
 
     name: str
@@ -49,11 +50,12 @@ class Option:
     choices: tuple[str, ...] | None = None
     words: dict[str, Any] = field(default_factory=dict)
     help: str = ""
+    noun: str = "a text"
 
     def accepts(self) -> str:
         """What this option accepts, in words, for error messages and help."""
         if self.kind is str:
-            text = f"one of {', '.join(self.choices)}" if self.choices else "a text"
+            text = f"one of {', '.join(self.choices)}" if self.choices else self.noun
         else:
             noun = "an integer" if self.kind is int else "a number"
             if self.low is not None and self.high is not None:

@@ -388,7 +388,7 @@ class RolloutPolicy(Policy):
     defaults: ClassVar[dict[str, Any]] = {}
     options = (
         Option("forecast", str, choices=tuple(sorted(PROVIDERS)), help="forecast provider"),
-        Option("model", str, help="trained predictor directory for forecast=model"),
+        Option("model", str, noun="a directory", help="trained predictor directory for forecast=model"),
         Option("horizon", int, low=1, high=240, help="H, minutes of base policy after the decision minute"),
         Option("samples", int, low=1, high=1_000_000, help="Monte-Carlo samples per agent decision"),
         Option("base", str, choices=tuple(BASES), help="base policy"),
