@@ -388,12 +388,14 @@ def zone_names_in_groups(path: Path) -> dict[int, str]:
     return dict(zip(table.ints("LocationID").tolist(), table.col("Zone")))
 
 
-def check_zone_polygons(ids: list[int], polygons: dict, names: dict[int, str], path: Path, *, known: dict[int, str] | None = None) -> None:
+def check_zone_polygons(ids: list[int], polygons: dict, names: dict[int, str], path: Path, *, known: dict[int, str] | None = None,
+                        where: str | None = None) -> None:
     """Every zone of ``ids`` must have a polygon of its own; else one line says which, and why when it can tell.
 
     ``known`` (zone id → name, from a groups or lookup table) lets the message
     say when a missing zone's name is that of a zone whose polygon covers it
-    (TLC zone 103's polygon covers 103–105).
+    (TLC zone 103's polygon covers 103–105).  ``where`` starts the message
+    (default: the zone file).
     """
     if not ids:
         raise ConfigError("no zones chosen")
@@ -403,8 +405,11 @@ def check_zone_polygons(ids: list[int], polygons: dict, names: dict[int, str], p
     by_name: dict[str, int] = {}
     for zid, name in names.items():
         by_name.setdefault(name, zid)
-    shared = {z: by_name[known[z]] for z in missing if known and known.get(z) in by_name}
-    hint = "".join(f"; zone {owner}'s polygon covers {z} (same name {known[z]!r})" for z, owner in shared.items()) if known else ""
+    covered: dict[int, list[int]] = {}
+    for z in missing:
+        if known and known.get(z) in by_name:
+            covered.setdefault(by_name[known[z]], []).append(z)
+    hint = "".join(f"; zone {owner}'s polygon covers {', '.join(map(str, zs))} (same name {names[owner]!r})" for owner, zs in covered.items())
     raise ConfigError(
-        f"{path}: zone(s) {', '.join(map(str, missing))} have no polygon of their own{hint}; "
+        f"{where or path}: zone(s) {', '.join(map(str, missing))} have no polygon of their own in {path.name}{hint}; "
         "leave them out (zones.missing = \"skip\" in a scenario file, or list the ids)")

@@ -137,7 +137,7 @@ def build_city(spec: ScenarioSpec) -> City:
             notes.append(note)
             warnings.warn(note, stacklevel=2)
         ids = [i for i in ids if i in polygons]
-    check_zone_polygons(ids, polygons, names, z.file, known=known)
+    check_zone_polygons(ids, polygons, names, z.file, known=known, where=f"{spec.path}: zones")
     return build_zone_map(spec.name, streets, polygons, names, ids, zone_src=z.file.name, notes=notes,
                           info={"scenario_file": str(spec.path), "zones": list(z.select[:1]) + [str(v) for v in z.select[1:]]})
 

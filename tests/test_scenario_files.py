@@ -194,8 +194,8 @@ def test_zone_without_its_own_polygon_is_explained(invented: Path) -> None:
     """As TLC zone 103's polygon covers 104 and 105: zone 5 shares zone 4's name and has no polygon of its own."""
     (invented.parent / "groups.csv").write_text("".join(f"{k},Quarter {min(k, 4)},Invented,all\n" for k in range(1, 6)))
     path = _edit(invented, 'ids = "all"', 'groups = "groups.csv"\ngroup = "all"')
-    with pytest.raises(ConfigError, match=r"zone\(s\) 5 have no polygon of their own; zone 4's polygon covers 5 \(same name 'Quarter 4'\); "
-                                          r"leave them out \(zones.missing = \"skip\""):
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: zones: zone\(s\) 5 have no polygon of their own in zones.geojson; "
+                                          r"zone 4's polygon covers 5 \(same name 'Quarter 4'\); leave them out \(zones.missing = \"skip\""):
         load_scenario(str(path))
     skip = _edit(invented, 'ids = "all"', 'groups = "groups.csv"\ngroup = "all"\nmissing = "skip"')
     with pytest.warns(UserWarning, match=r"left out zone\(s\) 5"):
