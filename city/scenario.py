@@ -24,7 +24,6 @@ from city.scenario_file import ScenarioSpec, read_scenario_file
 #: Scenario files shipped in the package, by name.
 SHIPPED = ("nyc", "manhattan")
 SCENARIOS = ("synthetic", *SHIPPED)
-SCENARIO_HELP = "synthetic (embedded), nyc or manhattan (shipped scenario files, need --data), or a scenario .toml file"
 #: Bump when a change to a city builder changes its output, so caches rebuild.
 CITY_VERSION = "2"
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 
-from city.scenario import SCENARIO_HELP
+SCENARIO_HELP = "synthetic (embedded), nyc or manhattan (shipped scenario files, need --data), or a scenario .toml file"
 
 
 def scenario_args(p: argparse.ArgumentParser) -> None:

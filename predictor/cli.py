@@ -6,7 +6,6 @@ import time
 from pathlib import Path
 
 from city.errors import ConfigError
-from city.scenario import SCENARIO_HELP
 
 
 def add_parser(subparsers) -> None:
@@ -14,7 +13,7 @@ def add_parser(subparsers) -> None:
     sub = p.add_subparsers(dest="predictor_command", required=True, metavar="{train,eval,serve}")
 
     t = sub.add_parser("train", help="embed events, train the no-event, event and standard networks (resumable)")
-    t.add_argument("--scenario", default="synthetic", help=SCENARIO_HELP)
+    t.add_argument("--scenario", default="synthetic", help="synthetic, nyc, manhattan or a scenario .toml file")
     t.add_argument("--data", default=None, help="data directory laid out like shared/data (for nyc, manhattan)")
     t.add_argument("--out", required=True, help="model directory to write (and resume from)")
     t.add_argument("--epochs", type=int, default=100, help="epochs for every network (paper: 100)")
@@ -42,7 +41,7 @@ def add_parser(subparsers) -> None:
     v = sub.add_parser("serve", help="answer a distributed run's forecast queries on the bus (torch stays in this process)")
     add_session_args(v)
     v.add_argument("--run", default="demo", help="run name (as the coordinator's --run)")
-    v.add_argument("--scenario", default="synthetic", help=SCENARIO_HELP)
+    v.add_argument("--scenario", default="synthetic", help="synthetic, nyc, manhattan or a scenario .toml file")
     v.add_argument("--data", default=None, help="data directory laid out like shared/data (for nyc, manhattan)")
     v.add_argument("--world-seed", type=int, default=0, help="seed of the demand world (as the coordinator's)")
     v.add_argument("--forecast", default="model", help="provider to serve: model (default), true-rate or previous-hour")
