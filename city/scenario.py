@@ -201,7 +201,7 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
         from city.weather import read_weather_csv
 
         w = spec.weather
-        weather = read_weather_csv(w.file, station=w.station or "LGA", year=year, columns=w.columns)
+        weather = read_weather_csv(w.file, station=w.station or "LGA", year=year, columns=w.columns, timezone=spec.timezone)
     if spec.pois is not None:
         from city.poi import read_poi_csv
 

@@ -40,7 +40,9 @@ AIRPORT_COLUMNS: dict[str, str] = {"temp_f": "temp", "precip_in": "precip", "win
 GENERIC_COLUMNS: tuple[str, ...] = ("time", "temp_f", "precip_in", "wind_mph")
 
 
-def read_weather_csv(path: Path | str, station: str = "LGA", year: int = 2022, columns: dict[str, str] | None = None) -> HourlyWeather:
+def read_weather_csv(
+    path: Path | str, station: str = "LGA", year: int = 2022, columns: dict[str, str] | None = None, timezone: str = "America/New_York"
+) -> HourlyWeather:
     """Read hourly weather for one local year from a CSV file.
 
     Two schemas are accepted: the hourly airport table (``origin, temp,
@@ -51,8 +53,8 @@ def read_weather_csv(path: Path | str, station: str = "LGA", year: int = 2022, c
     offset on a time is ignored: the wall-clock time as written is the local
     hour.
 
-    Clock changes: the hour skipped in spring (02:00) is filled with the
-    previous hour's values; the hour repeated in autumn (01:00) is the mean of
+    Clock changes (of ``timezone``): an hour the clocks skip in spring is
+    filled with the previous hour's values; the hour repeated in autumn (01:00) is the mean of
     its readings, as is any other hour read twice. Any other missing hour is
     filled by linear interpolation in time (the nearest reading at the ends
     of the year) and reported with a warning.
@@ -86,7 +88,7 @@ def read_weather_csv(path: Path | str, station: str = "LGA", year: int = 2022, c
     ok = (idx >= 0) & (idx < n)
     if not ok.any():
         raise DataError(f"no readings in {year} (column '{time_col}')", path=path)
-    spring = _spring_forward_hour(year)
+    skipped = _skipped_hours(year, timezone)
     out = {}
     filled = 0
     for name, col in value_cols.items():
@@ -94,8 +96,9 @@ def read_weather_csv(path: Path | str, station: str = "LGA", year: int = 2022, c
         good = ok & np.isfinite(values)
         total = np.bincount(idx[good], weights=values[good], minlength=n)
         count = np.bincount(idx[good], minlength=n)
-        if count[spring] == 0 and count[spring - 1] > 0:
-            total[spring], count[spring] = total[spring - 1], count[spring - 1]
+        for h in skipped:
+            if count[h] == 0 and count[h - 1] > 0:
+                total[h], count[h] = total[h - 1], count[h - 1]
         have = np.flatnonzero(count > 0)
         if len(have) == 0:
             raise DataError(f"column '{col}' has no readings in {year}", path=path)
@@ -108,8 +111,15 @@ def read_weather_csv(path: Path | str, station: str = "LGA", year: int = 2022, c
     return HourlyWeather(year=year, source=source, **out)
 
 
-def _spring_forward_hour(year: int) -> int:
-    """Index of the US Eastern hour skipped when clocks spring forward (second Sunday of March, 02:00)."""
-    march1 = dt.date(year, 3, 1)
-    second_sunday = march1 + dt.timedelta(days=(6 - march1.weekday()) % 7 + 7)
-    return (second_sunday.timetuple().tm_yday - 1) * 24 + 2
+def _skipped_hours(year: int, timezone: str) -> list[int]:
+    """Indices of the local wall-clock hours of ``year`` that ``timezone``'s clocks skip (spring forward)."""
+    from zoneinfo import ZoneInfo
+
+    zone, utc = ZoneInfo(timezone), dt.timezone.utc
+    start = dt.datetime(year, 1, 1)
+    out = []
+    for h in range(1, hours_in_year(year)):
+        wall = start + dt.timedelta(hours=h)
+        if wall.replace(tzinfo=zone).astimezone(utc).astimezone(zone).replace(tzinfo=None) != wall:
+            out.append(h)
+    return out
