@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from city.errors import DataError
 from city.occupancy import LOCALE_TYPES
 
 
@@ -117,6 +118,8 @@ def read_poi_csv(path: Path | str, borough: int | None = 1, types: dict[str, str
     path = Path(path)
     table = read_csv(path, [])
     if table.has("the_geom"):
+        if types is not None:
+            raise DataError("a type mapping applies to lon,lat,kind files; this NYC Planning export is mapped by FACILITY_T", path=path)
         table.require(["the_geom", "FACILITY_T", "NAME"])
         if borough is not None:
             table.require(["BOROUGH"])

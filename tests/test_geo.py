@@ -44,3 +44,13 @@ def test_prj_in_lonlat_needs_no_transform_and_a_bad_prj_is_one_line(tmp_path) ->
     assert -74.0 < lon < -73.97 and 40.73 < lat < 40.76
     with pytest.raises(DataError, match=r"zones\.prj: unreadable coordinate system"):
         lonlat_transform_from_prj("PROJCS[nonsense", tmp_path / "zones.prj")
+
+
+def test_poi_type_mapping_names_the_row_of_an_unmapped_kind(tmp_path) -> None:
+    from city.poi import read_poi_csv
+
+    path = tmp_path / "pois.csv"
+    path.write_text("lon,lat,kind\n-73.98,40.75,inn\n-73.97,40.76,zoo\n")
+    with pytest.raises(DataError, match=r"pois\.csv, row 3: column 'kind': 'zoo' is not in the type mapping \(inn\)"):
+        read_poi_csv(path, types={"inn": "hotel"})
+    assert read_poi_csv(path, types={"inn": "hotel", "zoo": "other"}).kind.tolist() == ["hotel", "other"]
