@@ -207,3 +207,14 @@ def test_cli_reports_a_bad_scenario_file_in_one_line(invented: Path, capsys: pyt
     assert main(["evaluate", "--scenario", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert err == f"surge: error: {path}: trips.share: expected int or float, got 'half'"
+
+
+def test_every_command_with_a_scenario_takes_a_scenario_file(invented: Path, capsys: pytest.CaptureFixture) -> None:
+    from coordinator.cli import build_parser
+
+    parser = build_parser()
+    for command in (["evaluate"], ["city"], ["demand"], ["fleet"], ["coordinator"], ["bench", "sim"], ["bench", "plan"],
+                    ["predictor", "train", "--out", "m"], ["predictor", "serve"]):
+        assert parser.parse_args([*command, "--scenario", str(invented)]).scenario == str(invented), command
+    assert main(["city", "--scenario", str(invented)]) == 0
+    assert "invented: 36 intersections, 120 streets, 4 sectors" in capsys.readouterr().out
