@@ -162,13 +162,14 @@ def read_streets(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return osmid, xy, u, v, length, source
 
 
-def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 2022, seed: int = 0) -> Scenario:
+def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 2022, seed: int = 0, share: float | None = None) -> Scenario:
     """The city and its demand world.
 
     ``synthetic`` generates everything.  A scenario file's world replays its
     trip records (``[trips] kind = "fhvhv"``) with its events when it has
     them, and is synthesised on the real map otherwise; weather and points of
-    interest come from its files when it names them.
+    interest come from its files when it names them.  ``share`` overrides
+    the file's share of its trips.
     """
     spec = scenario_spec(name, data_dir)
     city = load_city(name, data_dir)
@@ -181,12 +182,15 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
         from city.occupancy import read_occupancy_csv
 
         schedules = read_occupancy_csv(spec.occupancy)
-    return Scenario(name=name, city=city, world=build_world(spec, city, year=year, seed=seed), data_dir=spec.data_dir,
+    return Scenario(name=name, city=city, world=build_world(spec, city, year=year, seed=seed, share=share), data_dir=spec.data_dir,
                     spec=spec, schedules=schedules)
 
 
-def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int = 0) -> object:
+def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int = 0, share: float | None = None) -> object:
     """The demand world of a scenario file on its city.
+
+    The first ``[[trips]]`` entry with files is used; ``share`` (a command's
+    ``--share``) overrides its ``share``.
 
     Raises
     ------
@@ -206,16 +210,17 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
         from city.poi import read_poi_csv
 
         pois = read_poi_csv(spec.pois.file, borough=spec.pois.borough, types=spec.pois.types)
-    trips = spec.trips
+    trips = next((t for t in spec.trips if t.files), None)
     if trips is not None and trips.kind == "zone-od":
-        raise ConfigError(f"{spec.path}: trips.kind: \"zone-od\" profiles have no demand world in this build; "
+        raise ConfigError(f"{spec.path}: trips: \"zone-od\" profiles have no demand world in this build; "
                           "use kind = \"fhvhv\" or leave [trips] out")
-    if trips is not None and trips.files:
+    if trips is not None:
         from city.trips import read_fhvhv
 
         table = read_fhvhv(list(trips.files), city)
-        if trips.share < 1.0:
-            table = sample_trips(table, trips.share, seed)
+        keep = share if share is not None else trips.share
+        if keep is not None and keep < 1.0:
+            table = sample_trips(table, keep, seed)
         return RecordedWorld(city, table, year=year, seed=seed, events=read_scenario_events(spec, city), weather=weather, pois=pois)
     return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois)
 

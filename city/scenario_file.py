@@ -77,14 +77,16 @@ class PoiSpec:
 
 @dataclass(frozen=True)
 class TripsSpec:
-    """Trip records (``fhvhv`` parquet files) or a zone-OD profile, of which ``share`` is used.
+    """Trip records (``fhvhv`` parquet files) or a zone-OD profile, and the fleet's ``share`` of them.
 
-    ``optional``: no file matching is not an error (the world synthesises demand then).
+    ``share`` ``None`` leaves it to the world (all recorded trips; the
+    world's default share of a profile).  ``optional``: no matching file is
+    not an error (the next entry, or a synthesised demand, is used).
     """
 
     kind: str
     files: tuple[Path, ...]
-    share: float
+    share: float | None
     optional: bool
 
 
@@ -110,7 +112,7 @@ class ScenarioSpec:
     weather: WeatherSpec | None = None
     pois: PoiSpec | None = None
     occupancy: Path | None = None
-    trips: TripsSpec | None = None
+    trips: tuple[TripsSpec, ...] = ()
     events: EventsSpec | None = None
 
     def city_inputs(self) -> list[Path]:
@@ -311,29 +313,39 @@ def _occupancy(r: _Reader, doc: dict) -> Path | None:
     return None if t is None else r.file(t, "occupancy", "file", required=True)
 
 
-def _trips(r: _Reader, doc: dict) -> TripsSpec | None:
-    t = r.table(doc, "trips", ("kind", "files", "share", "optional"))
-    if t is None:
-        return None
-    kind = r.get(t, "trips", "kind", str, required=True)
+def _trips(r: _Reader, doc: dict) -> tuple[TripsSpec, ...]:
+    """``[trips]``, or ``[[trips]]`` entries in order of preference (the world uses the first whose files exist)."""
+    value = doc.get("trips")
+    if value is None:
+        return ()
+    if isinstance(value, dict):
+        return (_trip_entry(r, value, "trips"),)
+    if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+        return tuple(_trip_entry(r, v, f"trips[{k}]") for k, v in enumerate(value))
+    raise r.fail("trips", f"expected a table ([trips]) or tables ([[trips]]), got {value!r}")
+
+
+def _trip_entry(r: _Reader, t: dict, key: str) -> TripsSpec:
+    r.known(t, key, ("kind", "files", "share", "optional"))
+    kind = r.get(t, key, "kind", str, required=True)
     if kind not in TRIP_KINDS:
-        raise r.fail("trips.kind", f"{kind!r} is not one of {', '.join(TRIP_KINDS)}")
-    raw = r.get(t, "trips", "files", (str, list), required=True)
+        raise r.fail(f"{key}.kind", f"{kind!r} is not one of {', '.join(TRIP_KINDS)}")
+    raw = r.get(t, key, "files", (str, list), required=True)
     patterns = [raw] if isinstance(raw, str) else raw
     if not patterns or not all(isinstance(p, str) for p in patterns):
-        raise r.fail("trips.files", f"expected a path, a glob pattern or a list of them, got {raw!r}")
-    optional = r.get(t, "trips", "optional", bool, default=False)
+        raise r.fail(f"{key}.files", f"expected a path, a glob pattern or a list of them, got {raw!r}")
+    optional = r.get(t, key, "optional", bool, default=False)
     files: list[Path] = []
     for pattern in patterns:
-        resolved = r.resolve("trips.files", pattern)
+        resolved = r.resolve(f"{key}.files", pattern)
         found = sorted(Path(p) for p in glob.glob(str(resolved)))
         if not found and not optional:
-            raise r.fail("trips.files", f"no file matches {resolved}")
+            raise r.fail(f"{key}.files", f"no file matches {resolved}")
         files.extend(found)
-    share = r.get(t, "trips", "share", (int, float), default=1.0)
-    if not 0.0 < float(share) <= 1.0:
-        raise r.fail("trips.share", f"{share!r} is not a share in (0, 1]")
-    return TripsSpec(kind=kind, files=tuple(files), share=float(share), optional=optional)
+    share = r.get(t, key, "share", (int, float))
+    if share is not None and not 0.0 < float(share) <= 1.0:
+        raise r.fail(f"{key}.share", f"{share!r} is not a share in (0, 1]")
+    return TripsSpec(kind=kind, files=tuple(files), share=None if share is None else float(share), optional=optional)
 
 
 def _events(r: _Reader, doc: dict) -> EventsSpec | None:

@@ -218,3 +218,13 @@ def test_every_command_with_a_scenario_takes_a_scenario_file(invented: Path, cap
         assert parser.parse_args([*command, "--scenario", str(invented)]).scenario == str(invented), command
     assert main(["city", "--scenario", str(invented)]) == 0
     assert "invented: 36 intersections, 120 streets, 4 sectors" in capsys.readouterr().out
+
+
+def test_trips_entries_in_order_of_preference_and_share_override(invented: Path) -> None:
+    path = _edit(invented, '[trips]\nkind = "fhvhv"\nfiles = "trips/*.parquet"\nshare = 0.5\n',
+                 '[[trips]]\nkind = "fhvhv"\nfiles = "downloads/*.parquet"\noptional = true\n\n'
+                 '[[trips]]\nkind = "fhvhv"\nfiles = "trips/*.parquet"\n')
+    spec = scenario_spec(str(path))
+    assert spec is not None and [len(t.files) for t in spec.trips] == [0, 1] and spec.trips[1].share is None
+    assert load_scenario(str(path)).world.hourly_counts().sum() == 160  # every trip: no share given
+    assert load_scenario(str(path), share=0.25).world.hourly_counts().sum() < 80
