@@ -11,6 +11,11 @@ from city.errors import ConfigError
 from city.graph import City
 
 SCENARIOS = ("synthetic", "nyc")
+#: Environment variable with the fleet's share of real zone-profile trips (``--share``), so worker
+#: and agent processes build the same world as the command that started them.
+SHARE_ENV = "SURGE_SHARE"
+#: The real zone-to-zone trip profile under a data directory (base demand of ``nyc``).
+ZONE_PROFILE = Path("nyc") / "trips" / "manhattan_zone_od_15min_2018.csv"
 #: Bump when a change to a city builder changes its output, so caches rebuild.
 CITY_VERSION = "1"
 
@@ -81,14 +86,31 @@ def trip_files(data_dir: Path) -> list[Path]:
     return sorted((data_dir / "nyc" / "trips").glob("fhvhv_tripdata_*.parquet"))
 
 
-def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 2022, seed: int = 0) -> Scenario:
+def share_from_env() -> float | None:
+    """The ``--share`` a parent command exported, if any."""
+    text = os.environ.get(SHARE_ENV)
+    if not text:
+        return None
+    try:
+        share = float(text)
+    except ValueError:
+        raise ConfigError(f"{SHARE_ENV}={text!r} is not a number") from None
+    if not 0 < share <= 1:
+        raise ConfigError(f"{SHARE_ENV}={share} must be in (0, 1]")
+    return share
+
+
+def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 2022, seed: int = 0, share: float | None = None) -> Scenario:
     """The city and its demand world.
 
     ``synthetic`` generates everything.  ``nyc`` reads the real map, LGA hourly
     weather and points of interest from ``data_dir``; its demand is replayed
     from TLC HV-FHV trip records when ``nyc/trips/fhvhv_tripdata_*.parquet``
-    files are there (with the permitted-events calendar), and synthesised on
-    top of the real map otherwise.
+    files are there (with the permitted-events calendar).  Otherwise its base
+    demand and β come from the real zone profile (:data:`ZONE_PROFILE`) when
+    present, scaled by ``share`` (default ``$SURGE_SHARE``, else
+    :data:`city.demand.profile.FLEET_SHARE`), with synthetic weather effects,
+    holidays and event surges on top; without the file they are synthesised.
     """
     data_dir = check_scenario(name, data_dir)
     city = load_city(name, data_dir)
@@ -111,5 +133,13 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
         events = read_permitted_events(calendar, city) if calendar.exists() else []
         world = RecordedWorld(city, read_fhvhv(trips, city), year=year, seed=seed, events=events, weather=weather, pois=pois)
     else:
-        world = synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois)
+        from city.demand.profile import FLEET_SHARE
+
+        share = share if share is not None else share_from_env() or FLEET_SHARE
+        profile = None
+        if (data_dir / ZONE_PROFILE).exists():
+            from city.trips import read_zone_profile
+
+            profile = read_zone_profile(data_dir / ZONE_PROFILE, city)
+        world = synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, zone_profile=profile, share=share)
     return Scenario(name=name, city=city, world=world, data_dir=data_dir)

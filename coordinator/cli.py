@@ -12,6 +12,7 @@ import json
 import signal
 import sys
 import time
+import os
 import warnings
 from pathlib import Path
 
@@ -21,6 +22,18 @@ from city.errors import SurgeError
 def _scenario_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default="synthetic", help="synthetic (embedded) or nyc (needs --data)")
     p.add_argument("--data", default=None, help="data directory laid out like shared/data (for --scenario nyc)")
+    p.add_argument("--share", type=_share, default=None,
+                   help="the fleet's share of the real zone-profile trips on --scenario nyc (default 0.0171, see city.demand.profile.FLEET_SHARE)")
+
+
+def _share(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid share {text!r}") from None
+    if not 0 < v <= 1:
+        raise argparse.ArgumentTypeError(f"share {v} must be in (0, 1]")
+    return v
 
 
 def _date(text: str) -> str:
@@ -315,6 +328,10 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _terminated)
     parser = build_parser()
     args = parser.parse_args(argv)
+    if getattr(args, "share", None) is not None:
+        from city.scenario import SHARE_ENV
+
+        os.environ[SHARE_ENV] = repr(args.share)  # read by every load_scenario, worker processes included
     try:
         return int(args.func(args) or 0)
     except SurgeError as exc:

@@ -141,22 +141,23 @@ def draw_attendance(specs: list[EventSpec], events: list[Event], venues: list[Ve
     return out, attendance
 
 
-def event_trips(events: list[Event], attendance: np.ndarray, weather: HourlyWeather, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def event_trips(events: list[Event], attendance: np.ndarray, weather: HourlyWeather) -> tuple[np.ndarray, np.ndarray]:
     """The fleet's expected arrival and departure trips of each event."""
     per = np.array([TRIPS_PER_ATTENDEE[e.category] for e in events]).reshape(-1, 2)
     lift = 1.0 + RAIN_TAXI_LIFT * _rain(weather, events)
-    base = attendance * lift * FLEET_SHARE * scale
+    base = attendance * lift * FLEET_SHARE
     return base * per[:, 0], base * per[:, 1]
 
 
-def surges(events: list[Event], trips_arr: np.ndarray, trips_dep: np.ndarray, year: int, S: int):
+def surges(events: list[Event], trips_arr: np.ndarray, trips_dep: np.ndarray, year: int, S: int, scale: float = 1.0):
     """Expected event trips per hour by venue sector, arriving and departing, and per event-hour rows.
 
     Arrival requests enter 5 + Gamma(2.5, 12) minutes before the start (mean
     35 min), departures 2 + Gamma(1.5, 12) minutes after the end (mean 20
     min).  Events longer than :data:`LONG_EVENT_MIN` (expos, festivals) also
     spread half their arrivals over their first half and 40 % of their
-    departures over their second half.
+    departures over their second half.  ``scale`` multiplies the trips
+    after the event-hours are chosen, so it scales the result exactly.
 
     Returns ``arrivals`` and ``departures`` ``(hours, S)`` by venue sector
     and ``rows = (event index, hour, arrival trips, departure trips)``
@@ -190,6 +191,7 @@ def surges(events: list[Event], trips_arr: np.ndarray, trips_dep: np.ndarray, ye
     a = (g_arr(t1) - g_arr(t0)) * trips_arr[:, None]
     d = (g_dep(t1) - g_dep(t0)) * trips_dep[:, None]
     ok = (hours >= 0) & (hours < n_hours) & ((a + d) > 1e-3)
+    a, d = a * scale, d * scale
     ev, col = np.nonzero(ok)
     h = hours[ev, col].astype(np.int64)
     arrivals = np.bincount(h * S + sector[ev], weights=a[ev, col], minlength=n_hours * S).reshape(n_hours, S)

@@ -97,8 +97,8 @@ class SyntheticWorld(DemandWorld):
         # p(pickup sector | trip ends in sector v): where trips to v come from (base flows into v).
         inflow = self.intensity[:, None] * self._static_beta
         self._origin = (inflow / np.maximum(inflow.sum(axis=0, keepdims=True), 1e-300)).T
-        trips_arr, trips_dep = event_trips(self.events, attendance, weather, self.demand_scale)
-        self._arrivals, self._departures, self._event_rows = surges(self.events, trips_arr, trips_dep, year, S)
+        trips_arr, trips_dep = event_trips(self.events, attendance, weather)
+        self._arrivals, self._departures, self._event_rows = surges(self.events, trips_arr, trips_dep, year, S, self.demand_scale)
         self._rate = self._base + self._arrivals @ self._origin + self._departures
         self._rate.setflags(write=False)
         self._counts: np.ndarray | None = None
