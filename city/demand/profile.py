@@ -134,7 +134,7 @@ def derive_tables(od_csv: Path | str, yellow_csv: Path | str, daily_csv: Path | 
     weekdays = weekdays / weekdays[:, 19].mean()
     mean = weekdays.mean(axis=0)
     when = pd.to_datetime(pd.read_csv(yellow_csv, usecols=["pickup_datetime"])["pickup_datetime"])
-    dow, hour, day = when.dt.dayofweek.to_numpy(), when.dt.hour.to_numpy(), when.dt.normalize()
+    dow, hour, day = when.dt.day_of_week.to_numpy(), when.dt.hour.to_numpy(), when.dt.normalize()
 
     def per_day(sel: np.ndarray) -> np.ndarray:
         hist = np.bincount(hour[sel], minlength=24).astype(np.float64)
