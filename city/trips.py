@@ -152,15 +152,21 @@ def hourly_counts(trips: TripTable, year: int, n_sectors: int) -> np.ndarray:
     return np.bincount(flat, minlength=hours * n_sectors).reshape(hours, n_sectors)
 
 
-def od_matrix(trips: TripTable, n_sectors: int) -> np.ndarray:
+def od_matrix(trips: TripTable, n_sectors: int, months: Iterable[int] | None = None) -> np.ndarray:
     """β: relative frequency of each drop-off sector given the pickup sector, shape ``(S, S)``.
 
     Rows sum to one. A pickup sector with no trips gets a uniform row: with
-    no evidence, no destination is favoured.
+    no evidence, no destination is favoured.  ``months`` (1 = January) keeps
+    only the trips requested in those months, e.g. the training months, so
+    that β holds nothing from the months a model is tested on.
     """
-    counts = np.bincount(
-        trips.pickup_sector.astype(np.int64) * n_sectors + trips.dropoff_sector, minlength=n_sectors * n_sectors
-    ).reshape(n_sectors, n_sectors).astype(np.float64)
+    pu = trips.pickup_sector.astype(np.int64)
+    do = np.asarray(trips.dropoff_sector, dtype=np.int64)
+    if months is not None:
+        month = trips.request_time.astype("datetime64[M]").astype(np.int64) % 12 + 1
+        keep = np.isin(month, np.asarray(list(months), dtype=np.int64))
+        pu, do = pu[keep], do[keep]
+    counts = np.bincount(pu * n_sectors + do, minlength=n_sectors * n_sectors).reshape(n_sectors, n_sectors).astype(np.float64)
     totals = counts.sum(axis=1, keepdims=True)
     return np.where(totals > 0, counts / np.maximum(totals, 1.0), 1.0 / n_sectors)
 

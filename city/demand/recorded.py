@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import datetime as dt
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -19,14 +18,6 @@ from city.weather import HourlyWeather
 
 if TYPE_CHECKING:
     from city.trips import TripTable
-
-
-@dataclass(frozen=True)
-class _Trips:
-    """The two columns :func:`city.trips.od_matrix` reads."""
-
-    pickup_sector: np.ndarray
-    dropoff_sector: np.ndarray
 
 
 class RecordedWorld(DemandWorld):
@@ -84,6 +75,7 @@ class RecordedWorld(DemandWorld):
         self._rate = counts.astype(np.float64)
         self._rate.setflags(write=False)
         self._beta = od_matrix(trips, S)
+        self._trips = trips
         start = np.datetime64(dt.datetime(year, 1, 1), "m")
         minute = (trips.request_time.astype("datetime64[m]") - start).astype(np.int64)
         keep = (minute >= 0) & (minute < self.n_hours * 60)
@@ -111,6 +103,4 @@ class RecordedWorld(DemandWorld):
         """β from the records of ``months`` only (e.g. the training months)."""
         from city.trips import od_matrix
 
-        month = (np.datetime64(f"{self.year}-01-01", "m") + self._minute).astype("datetime64[M]").astype(np.int64) % 12 + 1
-        keep = np.isin(month, np.asarray(months))
-        return od_matrix(_Trips(self._pu[keep], self._do[keep]), self.city.n_sectors)
+        return od_matrix(self._trips, self.city.n_sectors, months=months)
