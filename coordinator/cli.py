@@ -238,10 +238,10 @@ def cmd_demand(args: argparse.Namespace) -> int:
     total = sum(r["expected"] for r in rows)
     usual = sum(r["usual"] for r in rows)
     print(f"{args.date} {args.hour:02d}:00  expected requests {total:.0f} (usual {usual:.0f}, ×{total / max(usual, 1e-9):.2f})")
-    print(f"{'sector':<28}{'expected':>10}{'usual':>8}{'ratio':>7}  events")
+    print(f"{'sector':<28}{'expected':>10}{'usual':>8}{'ratio':>7}{'drop-offs':>11}{'usual':>8}  events")
     for r in rows[: args.top]:
         ev = "; ".join(r["events"][:3])
-        print(f"{r['name'][:27]:<28}{r['expected']:>10.1f}{r['usual']:>8.1f}{r['ratio']:>7.2f}  {ev}")
+        print(f"{r['name'][:27]:<28}{r['expected']:>10.1f}{r['usual']:>8.1f}{r['ratio']:>7.2f}{r['dropoffs']:>11.1f}{r['usual_dropoffs']:>8.1f}  {ev}")
     if args.plot:
         _demand_plot(rows, args)
     if args.json:

@@ -175,7 +175,7 @@ def test_eval_evening_has_broadway_arena_and_surge(world: SyntheticWorld) -> Non
     assert report[1]["ratio"] >= 2.0 and report[0]["events"] and report[1]["events"]
     assert world.anchors["expo"] in [r["sector"] for r in report[:3]]
     assert [r["ratio"] for r in report] == sorted((r["ratio"] for r in report), reverse=True)
-    assert set(report[0]) == {"sector", "name", "expected", "usual", "ratio", "events"}
+    assert set(report[0]) == {"sector", "name", "expected", "usual", "ratio", "dropoffs", "usual_dropoffs", "events"}
     citywide, usual = sum(r["expected"] for r in report), sum(r["usual"] for r in report)
     assert citywide >= 1.15 * usual
     # The game's arrivals end at the arena: drop-offs into its sector run far above a usual Thursday.

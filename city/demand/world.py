@@ -237,17 +237,26 @@ def check_seed_year(seed: int, year: int) -> None:
 
 
 def surge_report(world: DemandWorld, date: dt.date, hour: int) -> list[dict]:
-    """Per sector: expected requests at ``date`` ``hour``, the usual level and the ratio.
+    """Per sector: expected requests (pickups) at ``date`` ``hour``, the usual level and the ratio.
 
     ``usual`` is the median expected demand of the same weekday and hour over
-    the year; rows are sorted by ``ratio``, highest first, and list the
-    events behind the sector's demand that hour.
+    the year; ``dropoffs`` / ``usual_dropoffs`` the same for the trips that
+    end in the sector (an event's arrivals end at its venue).  Rows are sorted
+    by ``ratio``, highest first, and list the events behind the sector's
+    demand that hour.
     """
     h = world._start(date, hour)
     rate = world.expected_rate()
     first = (date.weekday() - dt.date(world.year, 1, 1).weekday()) % 7
-    usual = np.median(rate[first * 24 + hour :: 7 * 24], axis=0)
+    same = np.arange(first * 24 + hour, world.n_hours, 7 * 24)
+    usual = np.median(rate[same], axis=0)
     expected = rate[h]
+
+    def dropoffs(row: int) -> np.ndarray:
+        return rate[row] @ world.od_matrix(world.when(int(row)))
+
+    drop = dropoffs(h)
+    usual_drop = np.median([dropoffs(r) for r in same], axis=0)
     ratio = expected / np.maximum(usual, 1e-9)
     titles = world.event_titles_by_sector(world.when(h))
     rows = [
@@ -257,6 +266,8 @@ def surge_report(world: DemandWorld, date: dt.date, hour: int) -> list[dict]:
             "expected": float(expected[s]),
             "usual": float(usual[s]),
             "ratio": float(ratio[s]),
+            "dropoffs": float(drop[s]),
+            "usual_dropoffs": float(usual_drop[s]),
             "events": titles[s],
         }
         for s in range(world.city.n_sectors)
