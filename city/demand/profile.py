@@ -33,7 +33,6 @@ import numpy as np
 
 from city.demand.climate import weather_factor
 from city.demand.dates import day_kind
-from city.graph import City
 from city.weather import HourlyWeather
 
 #: Citywide base requests per hour at the reference point: the mean weekday at 19:00, dry
@@ -149,8 +148,3 @@ def derive_tables(od_csv: Path | str, yellow_csv: Path | str, daily_csv: Path | 
     monthly = daily.groupby(daily.index.month).mean().to_numpy()
     return np.round(np.array(rows), 3), np.round(monthly / monthly.mean(), 3)
 
-
-def sector_intensity(city: City, hourly: np.ndarray) -> np.ndarray:
-    """Each sector's share of a zone profile's daily pickups (a floor keeps empty sectors drawable)."""
-    total = hourly.sum(axis=(0, 1)) + 1e-9
-    return total / total.sum()
