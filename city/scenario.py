@@ -86,6 +86,32 @@ def trip_files(data_dir: Path) -> list[Path]:
     return sorted((data_dir / "nyc" / "trips").glob("fhvhv_tripdata_*.parquet"))
 
 
+def load_zone_profile(path: Path, city: City):  # noqa: ANN201 - city.trips.ZoneProfile, imported lazily
+    """:func:`city.trips.read_zone_profile`, cached on disk by file and city (the CSV takes seconds to parse)."""
+    import warnings
+
+    import numpy as np
+
+    from city.trips import ZoneProfile, read_zone_profile
+
+    st = path.stat()
+    key = hashlib.sha256(f"{path.resolve()}|{st.st_size}|{st.st_mtime_ns}|{CITY_VERSION}|{city.sector_ids.tolist()}".encode())
+    cached = cache_dir() / f"zone-profile-{key.hexdigest()[:16]}.npz"
+    if cached.exists():
+        z = np.load(cached)
+        profile = ZoneProfile(z["trips"], z["business_days"], tuple(int(s) for s in z["filled"]), int(z["n_rows"]), int(z["n_outside"]), str(path))
+        if profile.filled:
+            zones = ", ".join(f"{city.sector_ids[s]} ({city.sector_names[s]})" for s in profile.filled)
+            warnings.warn(f"{path}: no trips from zone {zones}; filled from its adjacent zones per intersection", stacklevel=2)
+        return profile
+    profile = read_zone_profile(path, city)
+    tmp = cached.with_suffix(f".{os.getpid()}.tmp.npz")
+    np.savez(tmp, trips=profile.trips, business_days=profile.business_days, filled=np.array(profile.filled, dtype=np.int64),
+             n_rows=profile.n_rows, n_outside=profile.n_outside)
+    os.replace(tmp, cached)
+    return profile
+
+
 def share_from_env() -> float | None:
     """The ``--share`` a parent command exported, if any."""
     text = os.environ.get(SHARE_ENV)
@@ -138,8 +164,6 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
         share = share if share is not None else share_from_env() or FLEET_SHARE
         profile = None
         if (data_dir / ZONE_PROFILE).exists():
-            from city.trips import read_zone_profile
-
-            profile = read_zone_profile(data_dir / ZONE_PROFILE, city)
+            profile = load_zone_profile(data_dir / ZONE_PROFILE, city)
         world = synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, zone_profile=profile, share=share)
     return Scenario(name=name, city=city, world=world, data_dir=data_dir)

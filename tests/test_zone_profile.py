@@ -139,3 +139,17 @@ def test_real_zone_profile_on_the_nyc_map() -> None:
     # The 38 zones of the map keep the whole file's daily shape (PROFILE) to within 0.1 of the 19 h level.
     shape = prof.rate().sum(axis=2).mean(axis=0)
     np.testing.assert_allclose(shape / shape[19], PROFILE[:5].mean(axis=0) / PROFILE[:5, 19].mean(), atol=0.1)
+
+
+def test_scenario_caches_the_profile(tmp_path: Path, city: City, monkeypatch: pytest.MonkeyPatch) -> None:
+    from city.scenario import load_zone_profile
+
+    monkeypatch.setenv("SURGE_CACHE", str(tmp_path / "cache"))
+    path = write_profile(tmp_path / "p.csv", [(1, 76, 10, 20, 51), (2, 3, 20, 10, 102)])
+    with pytest.warns(UserWarning, match="zone 30"):
+        first = load_zone_profile(path, city)
+    assert len(list((tmp_path / "cache").glob("zone-profile-*.npz"))) == 1
+    with pytest.warns(UserWarning, match="zone 30"):
+        again = load_zone_profile(path, city)
+    np.testing.assert_array_equal(first.trips, again.trips)
+    assert (first.filled, first.n_rows) == (again.filled, again.n_rows)
