@@ -153,3 +153,20 @@ def test_scenario_caches_the_profile(tmp_path: Path, city: City, monkeypatch: py
         again = load_zone_profile(path, city)
     np.testing.assert_array_equal(first.trips, again.trips)
     assert (first.filled, first.n_rows) == (again.filled, again.n_rows)
+
+
+def test_share_flag_and_environment(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    from city.errors import ConfigError
+    from city.scenario import SHARE_ENV, share_from_env
+    from coordinator.cli import main
+
+    monkeypatch.delenv(SHARE_ENV, raising=False)
+    assert share_from_env() is None
+    with pytest.raises(SystemExit) as exc:
+        main(["demand", "--share", "1.5"])
+    assert exc.value.code == 2 and "share 1.5 must be in (0, 1]" in capsys.readouterr().err
+    monkeypatch.setenv(SHARE_ENV, "0.05")
+    assert share_from_env() == 0.05
+    monkeypatch.setenv(SHARE_ENV, "lots")
+    with pytest.raises(ConfigError, match="SURGE_SHARE='lots'"):
+        share_from_env()
