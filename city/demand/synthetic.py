@@ -95,8 +95,10 @@ class SyntheticWorld(DemandWorld):
             self.base_source = "real hourly profile (city.demand.profile.PROFILE) × sector intensity"
         self._base.setflags(write=False)
         # p(pickup sector | trip ends in sector v): where trips to v come from (base flows into v).
+        # A sector no trip ends in (possible in a sparse zone profile) draws its visitors locally.
         inflow = self.intensity[:, None] * self._static_beta
-        self._origin = (inflow / np.maximum(inflow.sum(axis=0, keepdims=True), 1e-300)).T
+        into = inflow.sum(axis=0, keepdims=True)
+        self._origin = np.where(into > 0, inflow / np.where(into > 0, into, 1.0), np.eye(S)).T
         trips_arr, trips_dep = event_trips(self.events, attendance, weather)
         self._arrivals, self._departures, self._event_rows = surges(self.events, trips_arr, trips_dep, year, S, self.demand_scale)
         self._rate = self._base + self._arrivals @ self._origin + self._departures
