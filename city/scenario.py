@@ -134,16 +134,19 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
     from TLC HV-FHV trip records when ``nyc/trips/fhvhv_tripdata_*.parquet``
     files are there (with the permitted-events calendar).  Otherwise its base
     demand and β come from the real zone profile (:data:`ZONE_PROFILE`) when
-    present, scaled by ``share`` (default ``$SURGE_SHARE``, else
-    :data:`city.demand.profile.FLEET_SHARE`), with synthetic weather effects,
-    holidays and event surges on top; without the file they are synthesised.
+    present, with synthetic weather effects, holidays and event surges on top;
+    without the file they are synthesised.  ``share`` (default ``$SURGE_SHARE``,
+    else :data:`city.demand.profile.FLEET_SHARE`) is the fleet's share of the real
+    market on the synthesised maps: it scales base demand and event trips.
     """
     data_dir = check_scenario(name, data_dir)
     city = load_city(name, data_dir)
     from city.demand import RecordedWorld, synthetic_world
+    from city.demand.profile import FLEET_SHARE
 
+    share = share if share is not None else share_from_env() or FLEET_SHARE
     if name == "synthetic":
-        return Scenario(name=name, city=city, world=synthetic_world(city, year=year, seed=seed), data_dir=data_dir)
+        return Scenario(name=name, city=city, world=synthetic_world(city, year=year, seed=seed, share=share), data_dir=data_dir)
     from city.poi import read_poi_csv
     from city.weather import read_weather_csv
 
@@ -159,9 +162,6 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
         events = read_permitted_events(calendar, city) if calendar.exists() else []
         world = RecordedWorld(city, read_fhvhv(trips, city), year=year, seed=seed, events=events, weather=weather, pois=pois)
     else:
-        from city.demand.profile import FLEET_SHARE
-
-        share = share if share is not None else share_from_env() or FLEET_SHARE
         profile = None
         if (data_dir / ZONE_PROFILE).exists():
             profile = load_zone_profile(data_dir / ZONE_PROFILE, city)

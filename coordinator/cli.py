@@ -23,7 +23,8 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default="synthetic", help="synthetic (embedded) or nyc (needs --data)")
     p.add_argument("--data", default=None, help="data directory laid out like shared/data (for --scenario nyc)")
     p.add_argument("--share", type=_share, default=None,
-                   help="the fleet's share of the real zone-profile trips on --scenario nyc (default 0.0171, see city.demand.profile.FLEET_SHARE)")
+                   help="the fleet's share of real taxi demand: scales base demand (the real zone profile on nyc) and event trips "
+                        "(default 0.0171, city.demand.profile.FLEET_SHARE)")
 
 
 def _share(text: str) -> float:

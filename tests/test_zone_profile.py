@@ -170,3 +170,12 @@ def test_share_flag_and_environment(monkeypatch: pytest.MonkeyPatch, capsys: pyt
     monkeypatch.setenv(SHARE_ENV, "lots")
     with pytest.raises(ConfigError, match="SURGE_SHARE='lots'"):
         share_from_env()
+
+
+def test_share_scales_the_synthetic_map_too(city: City) -> None:
+    """On a map without a profile, share scales base demand and event trips alike (default: REF_RATE at 19 h)."""
+    from city.demand.profile import FLEET_SHARE
+
+    a = synthetic_world(city, seed=2)
+    b = synthetic_world(city, seed=2, share=2 * FLEET_SHARE)
+    np.testing.assert_allclose(b.expected_rate(), 2 * a.expected_rate())

@@ -13,7 +13,7 @@ weather at the start and a random draw per event.  No text is a function of
 the realised attendance.
 
 Taxi trips are attendance × trips per attendee × the fleet's share of the
-market (:data:`TRIPS_PER_ATTENDEE`, :data:`FLEET_SHARE`).
+market (:data:`TRIPS_PER_ATTENDEE`, :data:`city.demand.profile.FLEET_SHARE`).
 """
 
 from __future__ import annotations
@@ -26,7 +26,6 @@ import numpy as np
 from scipy.special import gammainc
 
 from city import texts
-from city.demand.profile import FLEET_SHARE
 from city.demand.venues import COMMUNITY_KINDS, EventSpec
 from city.events import Event, Venue
 from city.weather import HourlyWeather, hours_in_year
@@ -61,6 +60,8 @@ REPUTATION_SD = 0.1
 OUTDOOR_KINDS = frozenset({"festival grounds", "park"})
 #: Events longer than this (minutes) spread part of their arrivals and departures over their duration.
 LONG_EVENT_MIN = 300
+#: Event-hours with fewer market trips than this (≈ 0.001 of the default fleet's) are left out.
+MIN_MARKET_TRIPS = 0.05
 _UNITS = {"convention center": "visitor", "festival grounds": "visitor", "park": "visitor", "conference center": "person", "community center": "person"}
 
 
@@ -142,10 +143,13 @@ def draw_attendance(specs: list[EventSpec], events: list[Event], venues: list[Ve
 
 
 def event_trips(events: list[Event], attendance: np.ndarray, weather: HourlyWeather) -> tuple[np.ndarray, np.ndarray]:
-    """The fleet's expected arrival and departure trips of each event."""
+    """Expected taxi and app-car trips of each event, arriving and departing, for the whole market.
+
+    The fleet's part is this × its share of the market (:data:`city.demand.profile.FLEET_SHARE` by default).
+    """
     per = np.array([TRIPS_PER_ATTENDEE[e.category] for e in events]).reshape(-1, 2)
     lift = 1.0 + RAIN_TAXI_LIFT * _rain(weather, events)
-    base = attendance * lift * FLEET_SHARE
+    base = attendance * lift
     return base * per[:, 0], base * per[:, 1]
 
 
@@ -156,8 +160,9 @@ def surges(events: list[Event], trips_arr: np.ndarray, trips_dep: np.ndarray, ye
     35 min), departures 2 + Gamma(1.5, 12) minutes after the end (mean 20
     min).  Events longer than :data:`LONG_EVENT_MIN` (expos, festivals) also
     spread half their arrivals over their first half and 40 % of their
-    departures over their second half.  ``scale`` multiplies the trips
-    after the event-hours are chosen, so it scales the result exactly.
+    departures over their second half.  ``trips_arr`` and ``trips_dep`` are
+    market trips; ``scale`` (the fleet's share × any demand scale) multiplies
+    them after the event-hours are chosen, so it scales the result exactly.
 
     Returns ``arrivals`` and ``departures`` ``(hours, S)`` by venue sector
     and ``rows = (event index, hour, arrival trips, departure trips)``
@@ -190,7 +195,7 @@ def surges(events: list[Event], trips_arr: np.ndarray, trips_dep: np.ndarray, ye
     t0, t1 = hours * 60, hours * 60 + 60
     a = (g_arr(t1) - g_arr(t0)) * trips_arr[:, None]
     d = (g_dep(t1) - g_dep(t0)) * trips_dep[:, None]
-    ok = (hours >= 0) & (hours < n_hours) & ((a + d) > 1e-3)
+    ok = (hours >= 0) & (hours < n_hours) & ((a + d) > MIN_MARKET_TRIPS)
     a, d = a * scale, d * scale
     ev, col = np.nonzero(ok)
     h = hours[ev, col].astype(np.int64)

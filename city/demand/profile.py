@@ -35,8 +35,9 @@ from city.demand.climate import weather_factor
 from city.demand.dates import day_kind
 from city.weather import HourlyWeather
 
-#: Citywide base requests per hour at the reference point: the mean weekday at 19:00, dry
-#: weather, month factor 1.  Sized for a 100-taxi fleet on the ≈2,200-node map (the paper's setup).
+#: Citywide base requests per hour at the reference point (the mean weekday at 19:00, dry
+#: weather, month factor 1) at the default share.  Sized for a 100-taxi fleet on the ≈2,200-node
+#: map (the paper's setup).
 REF_RATE = 290.0
 #: Real trips at 19 h on a business day with both ends in the 38 ``manhattan_below_60`` zones
 #: (``manhattan_zone_od_15min_2018.csv``, per business day as in :data:`PROFILE`; mean of Mon–Fri).
@@ -86,11 +87,14 @@ def day_factors(year: int) -> np.ndarray:
     return out
 
 
-def base_rate(year: int, weather: HourlyWeather, intensity: np.ndarray, tilt: np.ndarray) -> np.ndarray:
-    """Expected requests per sector-hour without events: REF_RATE × profile × month × weather × sector."""
+def base_rate(year: int, weather: HourlyWeather, intensity: np.ndarray, tilt: np.ndarray, share: float = FLEET_SHARE) -> np.ndarray:
+    """Expected requests per sector-hour without events: the real 19 h trips × share × profile × month × weather × sector.
+
+    With the default share the reference point is :data:`REF_RATE` requests per hour.
+    """
     citywide = day_factors(year)
     days = citywide.shape[0]
-    citywide = citywide.ravel() * weather_factor(weather) * REF_RATE
+    citywide = citywide.ravel() * weather_factor(weather) * REAL_TRIPS_19H * share
     shape = 1.0 + tilt[None, :] * np.tile(TILT, days)[:, None]
     return citywide[:, None] * intensity[None, :] * shape
 

@@ -89,10 +89,10 @@ class SyntheticWorld(DemandWorld):
             self.base_source = f"zone profile {zone_profile.source} × share {self.share:g}"
             notes.append(f"base demand: {self.base_source}")
         else:
-            self._base = base_rate(year, weather, self.intensity, tilt) * self.demand_scale
+            self._base = base_rate(year, weather, self.intensity, tilt, self.share) * self.demand_scale
             self._profile_beta = None
             self._static_beta = gravity_od(city, self.intensity)
-            self.base_source = "real hourly profile (city.demand.profile.PROFILE) × sector intensity"
+            self.base_source = f"real hourly profile (city.demand.profile.PROFILE) × share {self.share:g} × sector intensity"
         self._base.setflags(write=False)
         # p(pickup sector | trip ends in sector v): where trips to v come from (base flows into v).
         # A sector no trip ends in (possible in a sparse zone profile) draws its visitors locally.
@@ -100,7 +100,7 @@ class SyntheticWorld(DemandWorld):
         into = inflow.sum(axis=0, keepdims=True)
         self._origin = np.where(into > 0, inflow / np.where(into > 0, into, 1.0), np.eye(S)).T
         trips_arr, trips_dep = event_trips(self.events, attendance, weather)
-        self._arrivals, self._departures, self._event_rows = surges(self.events, trips_arr, trips_dep, year, S, self.demand_scale)
+        self._arrivals, self._departures, self._event_rows = surges(self.events, trips_arr, trips_dep, year, S, self.share * self.demand_scale)
         self._rate = self._base + self._arrivals @ self._origin + self._departures
         self._rate.setflags(write=False)
         self._counts: np.ndarray | None = None
@@ -271,6 +271,8 @@ def synthetic_world(
     zone_profile : ZoneProfile, optional
         Real zone-to-zone trip rates (:func:`city.trips.read_zone_profile`) for the base demand and β.
     share : float
-        The fleet's share of the zone profile's real trips (default :data:`~city.demand.profile.FLEET_SHARE`).
+        The fleet's share of the real market (default :data:`~city.demand.profile.FLEET_SHARE`, ≈ 1.7 %):
+        it scales the zone profile's trips, or the real profile's 19 h level on a map without one,
+        and the event-goers' trips.
     """
     return SyntheticWorld(city, year=year, seed=seed, weather=weather, pois=pois, demand_scale=demand_scale, zone_profile=zone_profile, share=share)
