@@ -3,8 +3,8 @@
 The demand world knows each synthetic event's latent popularity and
 sentiment; the predictor only sees text.  Text is written the way real
 listings are, *before* the event: the organiser's announcement (title and
-description) and reviews of the performer's or production's earlier events
-at venues like this one.  Nothing here sees the event's realised attendance
+description), reviews of the venue, and reviews of the performer's or
+production's earlier events at venues like this one.  Nothing here sees the event's realised attendance
 (see :mod:`city.demand.attendance`).  The text carries the drivers of
 attendance as real listings do:
 
@@ -206,6 +206,28 @@ BIG_CROWD = ("Huge crowds outside afterwards.", "The line to get in went around 
              "Took forever to get out with the crowds.", "Sold out and absolutely packed.")
 SMALL_CROWD = ("Only a handful of people there.", "Half-empty room.", "Easy to find a seat.",
                "Quiet and relaxed crowd.", "Small turnout, very low-key.")
+#: What reviewers of a venue talk about, and how they speak of its size.
+VENUE_THINGS = ("seats", "sightlines", "staff", "bathrooms", "location", "security line", "bar", "acoustics")
+VENUE_BIG = ("A huge place; getting in and out takes a while.", "Massive venue, plan extra time to leave.",
+             "Thousands of people, lines everywhere.")
+VENUE_SMALL = ("Cozy little room.", "Tiny venue, very intimate.", "Small space, you are close to the stage.")
+
+
+def venue_reviews(rng: random.Random, venue_name: str, kind: str, capacity: int) -> tuple[str, ...]:
+    """Three to eight reviews of the venue itself: its facilities, and its size."""
+    out = []
+    for _ in range(rng.randint(3, 8)):
+        kind_of = rng.choices((0, 1, 2), weights=(0.5, 0.3, 0.2))[0]
+        templates, adjs = ((POS_TEMPLATES, POS_ADJ), (NEU_TEMPLATES, NEU_ADJ), (NEG_TEMPLATES, NEG_ADJ))[kind_of]
+        a, x = rng.choice(adjs), rng.choice(VENUE_THINGS)
+        be = "were" if x.endswith("s") else "was"
+        text = f"{venue_name}: " + rng.choice(templates).format(x=x, be=be, a=a, A=a.capitalize())
+        if capacity >= 5000 and rng.random() < 0.5:
+            text += " " + rng.choice(VENUE_BIG)
+        elif capacity < 500 and rng.random() < 0.5:
+            text += " " + rng.choice(VENUE_SMALL)
+        out.append(text)
+    return tuple(out)
 
 
 def popularity_tier(popularity: float) -> int:

@@ -80,14 +80,19 @@ def reputation(spec: EventSpec, rng: random.Random) -> float:
 def write_events(specs: list[EventSpec], venues: list[Venue], rng: random.Random) -> tuple[list[Event], list[EventSpec]]:
     """Events with title, description and reviews (no attendance), sorted by start; and their specs in that order.
 
-    Reviews of a production or multi-day show are written once, from its
-    standing before its run, and shared by all its events.
+    Each event's reviews are the venue's own (:func:`city.texts.venue_reviews`,
+    written once per venue) followed by those of the performer's earlier
+    events.  Reviews of a production or multi-day show are written once,
+    from its standing before its run, and shared by all its events.
     """
     group_reviews: dict[int, tuple[str, ...]] = {}
+    about_venue: dict[int, tuple[str, ...]] = {}
     events = []
     for s in specs:
         venue = venues[s.venue]
         kind = next((k.lower() for k in COMMUNITY_KINDS if venue.name.endswith(k)), venue.kind)
+        if s.venue not in about_venue:
+            about_venue[s.venue] = texts.venue_reviews(random.Random(f"{venue.venue_id}-{venue.name}"), venue.name, kind, venue.capacity)
         where = texts.venue_phrase(venue.name, kind, s.capacity, _UNITS.get(venue.kind, "seat"))
         title = texts.title(rng, s.category, s.name, s.popularity, s.cue)
         if s.group < 0 or s.group not in group_reviews:
@@ -109,7 +114,7 @@ def write_events(specs: list[EventSpec], venues: list[Venue], rng: random.Random
                 sector=venue.sector,
                 node=venue.node,
                 venue_id=venue.venue_id,
-                reviews=reviews,
+                reviews=(about_venue[s.venue] + reviews)[: texts.MAX_REVIEWS],
             )
         )
     order = sorted(range(len(events)), key=lambda i: (events[i].start, events[i].venue_id, events[i].title))
