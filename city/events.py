@@ -129,7 +129,9 @@ def read_events(
     Raises
     ------
     DataError
-        A missing field, unknown category, bad time or position, naming file and row.
+        A missing field, bad time or position, naming file and row.  Events of a
+        category outside :data:`CATEGORIES` (PredictHQ has more) are skipped with
+        one warning naming the categories and the first row.
     """
     from city.csvio import nearest_nodes
 
@@ -137,6 +139,15 @@ def read_events(
     records = _json_records(path) if _is_json(path) else _csv_records(path)
     extra = read_reviews(reviews) if reviews is not None else {}
     parsed = [_parse_event(rec, line, path, tz) for line, rec in records]
+    unknown = [(line, p["category"]) for (line, _), p in zip(records, parsed) if p["category"] not in CATEGORIES]
+    if unknown:
+        names = ", ".join(sorted({c for _, c in unknown}))
+        warnings.warn(
+            f"{path}: skipped {len(unknown)} of {len(parsed)} events whose category is not one of {', '.join(CATEGORIES)} "
+            f"({names}; first at row {unknown[0][0]})",
+            stacklevel=2,
+        )
+        parsed = [p for p in parsed if p["category"] in CATEGORIES]
     if not parsed:
         return []
     lon = np.array([p["lon"] for p in parsed])
@@ -241,9 +252,7 @@ def _parse_event(rec: dict, line: int, path: Path, tz: str) -> dict:
         return ""
 
     event_id = text("event_id", "id")
-    category = text("category")
-    if category not in CATEGORIES:
-        raise fail(f"field 'category': {category!r} is not one of {', '.join(CATEGORIES)}")
+    category = text("category")  # an unknown category is skipped by the caller, with a warning
     zone = text("timezone", required=False) or tz
     start, end = (_local_time(text(k), zone, fail, k) for k in ("start", "end"))
     if end < start:

@@ -24,6 +24,9 @@ from city.scenario_file import ScenarioSpec, read_scenario_file
 #: Scenario files shipped in the package, by name.
 SHIPPED = ("nyc", "manhattan")
 SCENARIOS = ("synthetic", *SHIPPED)
+#: Environment variable with the fleet's share of real demand (``--share``), so worker
+#: and agent processes build the same world as the command that started them.
+SHARE_ENV = "SURGE_SHARE"
 #: Bump when a change to a city builder changes its output, so caches rebuild.
 CITY_VERSION = "2"
 
@@ -160,23 +163,65 @@ def read_streets(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray
         to_lonlat = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
         xy = np.column_stack(to_lonlat.transform(xy[:, 0], xy[:, 1]))
     return osmid, xy, u, v, length, source
+def load_zone_profile(path: Path, city: City):  # noqa: ANN201 - city.trips.ZoneProfile, imported lazily
+    """:func:`city.trips.read_zone_profile`, cached on disk by file and city (the CSV takes seconds to parse)."""
+    from city.trips import ZoneProfile, read_zone_profile
+
+    st = path.stat()
+    key = hashlib.sha256(f"{path.resolve()}|{st.st_size}|{st.st_mtime_ns}|{CITY_VERSION}|{city.sector_ids.tolist()}".encode())
+    cached = cache_dir() / f"zone-profile-{key.hexdigest()[:16]}.npz"
+    if cached.exists():
+        z = np.load(cached)
+        profile = ZoneProfile(z["trips"], z["business_days"], tuple(int(s) for s in z["filled"]), int(z["n_rows"]), int(z["n_outside"]), str(path))
+        if profile.filled:
+            zones = ", ".join(f"{city.sector_ids[s]} ({city.sector_names[s]})" for s in profile.filled)
+            warnings.warn(f"{path}: no trips from zone {zones}; filled from its adjacent zones per intersection", stacklevel=2)
+        return profile
+    profile = read_zone_profile(path, city)
+    tmp = cached.with_suffix(f".{os.getpid()}.tmp.npz")
+    np.savez(tmp, trips=profile.trips, business_days=profile.business_days, filled=np.array(profile.filled, dtype=np.int64),
+             n_rows=profile.n_rows, n_outside=profile.n_outside)
+    os.replace(tmp, cached)
+    return profile
+
+
+def share_from_env() -> float | None:
+    """The ``--share`` a parent command exported, if any."""
+    text = os.environ.get(SHARE_ENV)
+    if not text:
+        return None
+    try:
+        share = float(text)
+    except ValueError:
+        raise ConfigError(f"{SHARE_ENV}={text!r} is not a number") from None
+    if not 0 < share <= 1:
+        raise ConfigError(f"{SHARE_ENV}={share} must be in (0, 1]")
+    return share
 
 
 def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 2022, seed: int = 0, share: float | None = None) -> Scenario:
     """The city and its demand world.
 
     ``synthetic`` generates everything.  A scenario file's world replays its
-    trip records (``[trips] kind = "fhvhv"``) with its events when it has
-    them, and is synthesised on the real map otherwise; weather and points of
-    interest come from its files when it names them.  ``share`` overrides
-    the file's share of its trips.
+    trip records (``[[trips]] kind = "fhvhv"``) with its events when it has
+    them.  Otherwise it is synthesised on the real map: its base demand and β
+    come from a zone-OD profile (``kind = "zone-od"``, e.g. the real
+    Manhattan profile of ``nyc``) when it names one, with synthetic weather
+    effects, holidays and event surges on top; weather and points of interest
+    come from its files when it names them.  ``share`` (default
+    ``$SURGE_SHARE``) overrides the file's share of its trips; on a
+    synthesised world it scales base demand and event trips (default
+    :data:`city.demand.profile.FLEET_SHARE`).
     """
     spec = scenario_spec(name, data_dir)
     city = load_city(name, data_dir)
     from city.demand import synthetic_world
+    from city.demand.profile import FLEET_SHARE
 
+    share = share if share is not None else share_from_env()
     if spec is None:
-        return Scenario(name=name, city=city, world=synthetic_world(city, year=year, seed=seed), data_dir=check_scenario(name, data_dir))
+        world = synthetic_world(city, year=year, seed=seed, share=share or FLEET_SHARE)
+        return Scenario(name=name, city=city, world=world, data_dir=check_scenario(name, data_dir))
     schedules = None
     if spec.occupancy is not None:
         from city.occupancy import read_occupancy_csv
@@ -191,14 +236,9 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
 
     The first ``[[trips]]`` entry with files is used; ``share`` (a command's
     ``--share``) overrides its ``share``.
-
-    Raises
-    ------
-    ConfigError
-        ``[trips] kind = "zone-od"``: parsed and checked, but this build has no
-        demand world for a zone-OD profile.
     """
     from city.demand import RecordedWorld, synthetic_world
+    from city.demand.profile import FLEET_SHARE
 
     weather = pois = None
     if spec.weather is not None:
@@ -212,8 +252,9 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
         pois = read_poi_csv(spec.pois.file, borough=spec.pois.borough, types=spec.pois.types)
     trips = next((t for t in spec.trips if t.files), None)
     if trips is not None and trips.kind == "zone-od":
-        raise ConfigError(f"{spec.path}: trips: \"zone-od\" profiles have no demand world in this build; "
-                          "use kind = \"fhvhv\" or leave [trips] out")
+        profile = load_zone_profile(trips.files[0], city)
+        return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, zone_profile=profile,
+                               share=share or trips.share or FLEET_SHARE)
     if trips is not None:
         from city.trips import read_fhvhv
 
@@ -222,7 +263,7 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
         if keep is not None and keep < 1.0:
             table = sample_trips(table, keep, seed)
         return RecordedWorld(city, table, year=year, seed=seed, events=read_scenario_events(spec, city), weather=weather, pois=pois)
-    return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois)
+    return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, share=share or FLEET_SHARE)
 
 
 def sample_trips(table, share: float, seed: int):  # noqa: ANN001, ANN201

@@ -1,18 +1,23 @@
-"""Seeded event text: titles, descriptions and reviews that carry what drives attendance.
+"""Seeded event text: titles, descriptions and reviews, written before the event.
 
 The demand world knows each synthetic event's latent popularity and
-sentiment; the predictor only sees text.  So the text is written to carry
-those drivers the way real listings do:
+sentiment; the predictor only sees text.  Text is written the way real
+listings are, *before* the event: the organiser's announcement (title and
+description), reviews of the venue, and reviews of the performer's or
+production's earlier events at venues like this one.  Nothing here sees the event's realised attendance
+(see :mod:`city.demand.attendance`).  The text carries the drivers of
+attendance as real listings do:
 
 * the **category** through its own vocabulary (``Broadway musical``,
   ``tip-off``, ``exhibitors``, ``keynote`` …) in titles, descriptions and
   reviews;
 * the **venue size** through the venue name and its seat count;
-* the **popularity** through five tiers of cue phrases (``Sold-Out``,
-  ``Final Week``, ``highly anticipated`` … down to ``Community Night``,
-  ``a quiet evening``), through the number of reviews (1–100, growing with
-  popularity) and through crowd, line and traffic remarks in the reviews of
-  big events;
+* the **popularity** (ticket sales as the organiser announces them) through
+  five tiers of cue phrases (``Sold-Out``, ``Final Week``, ``highly
+  anticipated`` … down to ``Community Night``, ``a quiet evening``);
+* the performer's **reputation** (what its earlier events drew) through the
+  number of reviews (1–100, growing with it) and through crowd, line and
+  traffic remarks where such events fill a big venue;
 * the **sentiment** through the mixture of positive, neutral and negative
   reviews and a critics' sentence in the description.
 
@@ -201,6 +206,28 @@ BIG_CROWD = ("Huge crowds outside afterwards.", "The line to get in went around 
              "Took forever to get out with the crowds.", "Sold out and absolutely packed.")
 SMALL_CROWD = ("Only a handful of people there.", "Half-empty room.", "Easy to find a seat.",
                "Quiet and relaxed crowd.", "Small turnout, very low-key.")
+#: What reviewers of a venue talk about, and how they speak of its size.
+VENUE_THINGS = ("seats", "sightlines", "staff", "bathrooms", "location", "security line", "bar", "acoustics")
+VENUE_BIG = ("A huge place; getting in and out takes a while.", "Massive venue, plan extra time to leave.",
+             "Thousands of people, lines everywhere.")
+VENUE_SMALL = ("Cozy little room.", "Tiny venue, very intimate.", "Small space, you are close to the stage.")
+
+
+def venue_reviews(rng: random.Random, venue_name: str, kind: str, capacity: int) -> tuple[str, ...]:
+    """Three to eight reviews of the venue itself: its facilities, and its size."""
+    out = []
+    for _ in range(rng.randint(3, 8)):
+        kind_of = rng.choices((0, 1, 2), weights=(0.5, 0.3, 0.2))[0]
+        templates, adjs = ((POS_TEMPLATES, POS_ADJ), (NEU_TEMPLATES, NEU_ADJ), (NEG_TEMPLATES, NEG_ADJ))[kind_of]
+        a, x = rng.choice(adjs), rng.choice(VENUE_THINGS)
+        be = "were" if x.endswith("s") else "was"
+        text = f"{venue_name}: " + rng.choice(templates).format(x=x, be=be, a=a, A=a.capitalize())
+        if capacity >= 5000 and rng.random() < 0.5:
+            text += " " + rng.choice(VENUE_BIG)
+        elif capacity < 500 and rng.random() < 0.5:
+            text += " " + rng.choice(VENUE_SMALL)
+        out.append(text)
+    return tuple(out)
 
 
 def popularity_tier(popularity: float) -> int:
@@ -258,23 +285,26 @@ def review_count(rng: random.Random, popularity: float) -> int:
 def reviews(
     rng: random.Random,
     category: str,
-    popularity: float,
+    reputation: float,
     sentiment: float,
-    attendance: float,
+    crowd: float,
 ) -> tuple[str, ...]:
-    """Up to 100 short reviews whose count, tone and crowd remarks follow the drivers of attendance.
+    """Up to 100 short reviews of a performer's earlier events: count, tone and crowd remarks.
 
-    The share of positive reviews grows with ``sentiment`` and the share of
-    negative ones shrinks; events of several thousand people draw crowd,
-    line and traffic remarks, small ones remarks on a thin turnout.
+    ``reputation`` is the performer's standing before this event and
+    ``crowd`` the crowd its earlier events drew at a venue like this one
+    (never this event's attendance).  The share of positive reviews grows
+    with ``sentiment`` and the share of negative ones shrinks; crowds of
+    several thousand draw crowd, line and traffic remarks, small ones
+    remarks on a thin turnout.
     """
-    n = review_count(rng, popularity)
+    n = review_count(rng, reputation)
     p_pos = 0.05 + 0.85 * sentiment**1.2
     p_neg = 0.05 + 0.6 * (1.0 - sentiment) ** 1.5
     p_neu = max(0.05, 1.0 - p_pos - p_neg)
     kinds = rng.choices((0, 1, 2), weights=(p_pos, p_neu, p_neg), k=n)
-    crowd_p = min(0.6, attendance / 15000.0) if attendance >= 1500 else 0.0
-    small_p = 0.4 if attendance < 250 else 0.0
+    crowd_p = min(0.6, crowd / 15000.0) if crowd >= 1500 else 0.0
+    small_p = 0.4 if crowd < 250 else 0.0
     things = THINGS[category]
     out = []
     for kind in kinds:

@@ -152,14 +152,186 @@ def hourly_counts(trips: TripTable, year: int, n_sectors: int) -> np.ndarray:
     return np.bincount(flat, minlength=hours * n_sectors).reshape(hours, n_sectors)
 
 
-def od_matrix(trips: TripTable, n_sectors: int) -> np.ndarray:
+def od_matrix(trips: TripTable, n_sectors: int, months: Iterable[int] | None = None) -> np.ndarray:
     """β: relative frequency of each drop-off sector given the pickup sector, shape ``(S, S)``.
 
     Rows sum to one. A pickup sector with no trips gets a uniform row: with
-    no evidence, no destination is favoured.
+    no evidence, no destination is favoured.  ``months`` (1 = January) keeps
+    only the trips requested in those months, e.g. the training months, so
+    that β holds nothing from the months a model is tested on.
     """
-    counts = np.bincount(
-        trips.pickup_sector.astype(np.int64) * n_sectors + trips.dropoff_sector, minlength=n_sectors * n_sectors
-    ).reshape(n_sectors, n_sectors).astype(np.float64)
+    pu = trips.pickup_sector.astype(np.int64)
+    do = np.asarray(trips.dropoff_sector, dtype=np.int64)
+    if months is not None:
+        month = trips.request_time.astype("datetime64[M]").astype(np.int64) % 12 + 1
+        keep = np.isin(month, np.asarray(list(months), dtype=np.int64))
+        pu, do = pu[keep], do[keep]
+    counts = np.bincount(pu * n_sectors + do, minlength=n_sectors * n_sectors).reshape(n_sectors, n_sectors).astype(np.float64)
     totals = counts.sum(axis=1, keepdims=True)
     return np.where(totals > 0, counts / np.maximum(totals, 1.0), 1.0 / n_sectors)
+
+
+# ------------------------------------------------------------ zone-to-zone profiles
+#: Columns of a zone profile (``manhattan_zone_od_15min_2018.csv``).
+ZONE_PROFILE_COLUMNS: tuple[str, ...] = ("dow", "t_15min", "puzone", "dozone", "n_trips")
+#: Ranges of the integer columns (inclusive): weekday 0 = Monday … 4 = Friday, slot 0 … 95.
+_ZONE_RANGES = {"dow": (0, 4), "t_15min": (0, 95), "puzone": (1, 10**6), "dozone": (1, 10**6), "n_trips": (0, 10**12)}
+
+
+@dataclass(frozen=True)
+class ZoneProfile:
+    """Trips between a city's sectors per business day, by weekday and 15-minute slot.
+
+    Attributes
+    ----------
+    trips : ndarray of float64, shape (5, 96, S, S)
+        Mean trips per business day of each weekday (Monday … Friday) and
+        slot, from pickup sector to drop-off sector, both inside the city.
+    business_days : ndarray of int, shape (5,)
+        Days each weekday's counts were summed over.
+    filled : tuple of int
+        Sectors absent from the file, filled by :func:`fill_missing_sectors`.
+    n_rows, n_outside : int
+        Rows read, and rows with a zone outside the city (ignored).
+    source : str
+    """
+
+    trips: np.ndarray
+    business_days: np.ndarray
+    filled: tuple[int, ...]
+    n_rows: int
+    n_outside: int
+    source: str
+
+    def hourly(self) -> np.ndarray:
+        """``(5, 24, S, S)`` trips per business day and hour."""
+        t = self.trips
+        return t.reshape(5, 24, 4, *t.shape[2:]).sum(axis=2)
+
+    def rate(self) -> np.ndarray:
+        """η per business day: ``(5, 24, S)`` pickups per hour by pickup sector (the real base rate)."""
+        return self.hourly().sum(axis=3)
+
+    def beta(self) -> np.ndarray:
+        """β per weekday and hour: ``(5, 24, S, S)``, rows sum to one (uniform where a sector has no trips)."""
+        h = self.hourly()
+        total = h.sum(axis=3, keepdims=True)
+        return np.where(total > 0, h / np.maximum(total, 1e-300), 1.0 / h.shape[3])
+
+
+def business_days(year: int) -> np.ndarray:
+    """Monday … Friday counts of ``year`` that are not US federal holidays (``holidays`` package)."""
+    import holidays
+
+    off = holidays.country_holidays("US", years=year)
+    out = np.zeros(5, dtype=np.int64)
+    day = dt.date(year, 1, 1)
+    while day.year == year:
+        if day.weekday() < 5 and day not in off:
+            out[day.weekday()] += 1
+        day += dt.timedelta(days=1)
+    return out
+
+
+def read_zone_profile(path: Path | str, city: City, *, year: int = 2018) -> ZoneProfile:
+    """Read a zone-to-zone trip-count profile (``dow,t_15min,puzone,dozone,n_trips``) for ``city``.
+
+    ``n_trips`` is the number of trips of that weekday and slot summed over
+    the business days of ``year`` (the format of
+    ``manhattan_zone_od_15min_2018.csv``); counts are divided by the business
+    days of each weekday (:func:`business_days`).  Zones are TLC LocationIDs
+    mapped through ``city.sector_ids``; trips with an end outside the city
+    are ignored.  City sectors with no pickups in the file are filled by
+    :func:`fill_missing_sectors`, with a warning.
+
+    Raises
+    ------
+    DataError
+        A missing column, or a row with a non-integer or out-of-range field
+        (the message names the file, the 1-based line and the field).
+    """
+    import warnings
+
+    import pandas as pd
+
+    path = Path(path)
+    values, n_rows = _zone_profile_columns(path)
+    S = city.n_sectors
+    lookup = np.full(max(int(city.sector_ids.max()), int(values["puzone"].max()), int(values["dozone"].max())) + 1, -1, dtype=np.int64)
+    lookup[city.sector_ids] = np.arange(S)
+    pu, do = lookup[values["puzone"]], lookup[values["dozone"]]
+    inside = (pu >= 0) & (do >= 0)
+    days = business_days(year)
+    trips = np.zeros((5, 96, S, S))
+    np.add.at(trips, (values["dow"][inside], values["t_15min"][inside], pu[inside], do[inside]), values["n_trips"][inside])
+    trips /= days[:, None, None, None]
+    missing = tuple(int(s) for s in np.flatnonzero(trips.sum(axis=(0, 1, 3)) == 0))
+    if missing:
+        trips = fill_missing_sectors(trips, city, missing)
+        zones = ", ".join(f"{city.sector_ids[s]} ({city.sector_names[s]})" for s in missing)
+        warnings.warn(f"{path}: no trips from zone {zones}; filled from its adjacent zones per intersection", stacklevel=2)
+    return ZoneProfile(trips, days, missing, n_rows, int((~inside).sum()), str(path))
+
+
+def _zone_profile_columns(path: Path) -> tuple[dict[str, np.ndarray], int]:
+    """The profile's columns as int64 arrays; the first bad field raises a one-line :class:`DataError`."""
+    import pandas as pd
+
+    def fail(exc: Exception) -> DataError:
+        return DataError(f"not a readable CSV file ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})", path=path)
+
+    try:
+        header = pd.read_csv(path, nrows=0).columns
+    except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise fail(exc) from None
+    for col in ZONE_PROFILE_COLUMNS:
+        if col not in header:
+            raise DataError(f"missing column '{col}' (expected {','.join(ZONE_PROFILE_COLUMNS)})", path=path)
+    try:  # fast path: every field an integer
+        table = pd.read_csv(path, usecols=list(ZONE_PROFILE_COLUMNS), dtype=np.int64)
+        numeric = {c: table[c] for c in ZONE_PROFILE_COLUMNS}
+        text = None
+    except (ValueError, OverflowError):
+        try:
+            table = pd.read_csv(path, usecols=list(ZONE_PROFILE_COLUMNS), dtype=str, keep_default_na=False)
+        except (UnicodeDecodeError, pd.errors.ParserError) as exc:
+            raise fail(exc) from None
+        text = table
+        numeric = {c: pd.to_numeric(table[c].str.strip(), errors="coerce") for c in ZONE_PROFILE_COLUMNS}
+    except (UnicodeDecodeError, pd.errors.ParserError) as exc:
+        raise fail(exc) from None
+    values = {}
+    for col in ZONE_PROFILE_COLUMNS:
+        num = numeric[col]
+        lo, hi = _ZONE_RANGES[col]
+        bad = (num.isna() | (num != np.floor(num)) | (num < lo) | (num > hi)).to_numpy()
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            shown = text[col].iloc[i] if text is not None else num.iloc[i]
+            raise DataError(f"field '{col}': {shown!r} is not an integer in {lo}..{hi}", path=path, row=i + 2)
+        values[col] = num.to_numpy(dtype=np.int64)
+    return values, len(table)
+
+
+def fill_missing_sectors(trips: np.ndarray, city: City, missing: tuple[int, ...]) -> np.ndarray:
+    """Fallback for sectors a profile has no trips for: their adjacent sectors' trips per intersection.
+
+    A missing sector's pickups to each destination, and every sector's
+    drop-offs into it, are the mean over its adjacent sectors that have data
+    of their trips per pickup-eligible intersection, times its own number of
+    pickup-eligible intersections.  A missing sector with no such neighbour
+    stays empty.
+    """
+    trips = trips.copy()
+    size = np.bincount(city.node_sector[city.pickup], minlength=city.n_sectors).astype(np.float64)
+    known = np.ones(city.n_sectors, dtype=bool)
+    known[list(missing)] = False
+    for m in missing:
+        nb = [int(n) for n in np.flatnonzero(city.sector_adj[m]) if known[n] and size[n] > 0 and n != m]
+        if not nb:
+            continue
+        per_node_row = np.mean([trips[:, :, n, :] / size[n] for n in nb], axis=0)
+        trips[:, :, m, :] = per_node_row * size[m]
+        per_node_col = np.mean([trips[:, :, :, n] / size[n] for n in nb], axis=0)
+        trips[:, :, :, m] = per_node_col * size[m]
+    return trips

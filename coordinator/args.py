@@ -19,6 +19,20 @@ def scenario_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default="synthetic", help=SCENARIO_HELP)
     p.add_argument("--data", default=None,
                    help="data directory laid out like shared/data, for scenario files that read from it (nyc, manhattan)")
+    p.add_argument("--share", type=share, default=None,
+                   help="the fleet's share of real taxi demand: scales base demand (the real zone profile on nyc) and event trips "
+                        "(default 0.0171, city.demand.profile.FLEET_SHARE)")
+
+
+def share(text: str) -> float:
+    """An argparse type: a share of real demand in (0, 1]."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid share {text!r}") from None
+    if not 0 < v <= 1:
+        raise argparse.ArgumentTypeError(f"share {v} must be in (0, 1]")
+    return v
 
 
 def iso_date(text: str) -> str:

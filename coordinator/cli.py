@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
+import os
 import signal
 import sys
 import time
@@ -178,10 +179,10 @@ def cmd_demand(args: argparse.Namespace) -> int:
     total = sum(r["expected"] for r in rows)
     usual = sum(r["usual"] for r in rows)
     print(f"{args.date} {args.hour:02d}:00  expected requests {total:.0f} (usual {usual:.0f}, ×{total / max(usual, 1e-9):.2f})")
-    print(f"{'sector':<28}{'expected':>10}{'usual':>8}{'ratio':>7}  events")
+    print(f"{'sector':<28}{'expected':>10}{'usual':>8}{'ratio':>7}{'drop-offs':>11}{'usual':>8}  events")
     for r in rows[: args.top]:
         ev = "; ".join(r["events"][:3])
-        print(f"{r['name'][:27]:<28}{r['expected']:>10.1f}{r['usual']:>8.1f}{r['ratio']:>7.2f}  {ev}")
+        print(f"{r['name'][:27]:<28}{r['expected']:>10.1f}{r['usual']:>8.1f}{r['ratio']:>7.2f}{r['dropoffs']:>11.1f}{r['usual_dropoffs']:>8.1f}  {ev}")
     if args.plot:
         _demand_plot(rows, args)
     if args.json:
@@ -268,6 +269,10 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _terminated)
     parser = build_parser()
     args = parser.parse_args(argv)
+    if getattr(args, "share", None) is not None:
+        from city.scenario import SHARE_ENV
+
+        os.environ[SHARE_ENV] = repr(args.share)  # read by every load_scenario, worker processes included
     try:
         return int(args.func(args) or 0)
     except SurgeError as exc:
