@@ -72,9 +72,9 @@ class Option:
         """The option's value from text (``"10"``) or an already typed value; ``ValueError`` if not accepted."""
         if isinstance(value, str) and value.strip().lower() in self.words:
             return self.words[value.strip().lower()]
-        if value is None or any(value is v for v in self.words.values()):
-            if value in self.words.values():
-                return value
+        if value is None:
+            if any(v is None for v in self.words.values()):
+                return None
             raise ValueError(value)
         if self.kind is str:
             if isinstance(value, os.PathLike) and not self.choices:
