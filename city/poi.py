@@ -57,11 +57,6 @@ def locale_counts(xy: np.ndarray, crs: str, pois: Pois, radius_m: float = POI_RA
     return _counts_within(metric_xy(xy, crs, origin=origin), pois.kind, metric_xy(pts, crs, origin=origin), radius_m)
 
 
-def locale_counts_from_pois(xy: np.ndarray, pois: Pois, radius: float) -> np.ndarray:
-    """n_λ(j) with ``radius`` in the units of ``xy``; the demand world's call until it moves to :func:`locale_counts`."""
-    return _counts_within(np.asarray(xy, dtype=np.float64), pois.kind, np.column_stack([pois.x, pois.y]).astype(np.float64), radius)
-
-
 def _counts_within(xy: np.ndarray, kind: np.ndarray, pts: np.ndarray, radius: float) -> np.ndarray:
     from scipy.spatial import cKDTree
 

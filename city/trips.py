@@ -221,9 +221,9 @@ class ZoneProfile:
 
 def business_days(year: int) -> np.ndarray:
     """Monday … Friday counts of ``year`` that are not US federal holidays (``holidays`` package)."""
-    import holidays
+    from city.calendar import holidays_for
 
-    off = holidays.country_holidays("US", years=year)
+    off = holidays_for(year)
     out = np.zeros(5, dtype=np.int64)
     day = dt.date(year, 1, 1)
     while day.year == year:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import datetime as dt
 from functools import lru_cache
 
-import holidays as _holidays
+from city.calendar import holidays_for
 
 #: The paper's evaluation date: a Thursday with Broadway and arena events and an event surge at 7 pm.
 EVAL_DATE = dt.date(2022, 11, 17)
@@ -26,7 +26,7 @@ def holiday_dates(year: int) -> frozenset[dt.date]:
     They are the days that the real zone profile leaves out of its business
     days, so the world gives them a Sunday profile.
     """
-    return frozenset(_holidays.country_holidays(HOLIDAY_COUNTRY, years=year))
+    return frozenset(holidays_for(year, HOLIDAY_COUNTRY))
 
 
 def day_kind(date: dt.date) -> int:

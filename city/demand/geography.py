@@ -6,14 +6,13 @@ import numpy as np
 
 from city.graph import City
 from city.occupancy import LOCALE_TYPES
-from city.poi import Pois, locale_counts_from_pois
+from city.poi import Pois
+from city.poi import locale_counts as poi_counts
 
 #: Target mean trip length of the gravity OD matrix, in hops.
 TARGET_TRIP_HOPS = 15.0
 #: Locale counts added to every intersection so that each can be drawn at any hour.
 LOCALE_FLOOR = 0.05
-#: POI radius for locale counts: metres, or degrees on lon/lat maps (≈100 m in Manhattan).
-POI_RADIUS = {"m": 100.0, "lonlat": 0.0012}
 
 
 #: Name fragments that identify anchor sectors on a real map (TLC zone names).
@@ -98,8 +97,7 @@ def locale_counts(
     if pois is None:
         pois = synthetic_pois(city, busy, anchors, rng)
         notes.append(f"points of interest: {len(pois.kind)} synthetic")
-    radius = POI_RADIUS.get(city.crs, POI_RADIUS["m"])
-    counts = locale_counts_from_pois(city.xy, pois, radius)
+    counts = poi_counts(city.xy, city.crs, pois)
     n_kind = {k: int(np.sum(pois.kind == k)) for k in LOCALE_TYPES}
     if n_kind["restaurant"] < 0.5 * n_kind["retail"]:
         # The NYC Planning POI file lists almost no restaurants (40 in Manhattan); restaurants follow

@@ -121,16 +121,12 @@ def profile_base_rate(year: int, weather: HourlyWeather, hourly: np.ndarray, sha
 
 def derive_tables(od_csv: Path | str, yellow_csv: Path | str, daily_csv: Path | str) -> tuple[np.ndarray, np.ndarray]:
     """Recompute :data:`PROFILE` and :data:`MONTH_FACTOR` from the real files (as the module docstring says)."""
-    import holidays
     import pandas as pd
 
+    from city.trips import business_days
+
     od = pd.read_csv(od_csv, usecols=["dow", "t_15min", "n_trips"])
-    off = holidays.country_holidays("US", years=2018)
-    n_days = np.zeros(5)
-    for d in range(365):
-        date = dt.date(2018, 1, 1) + dt.timedelta(days=d)
-        if date.weekday() < 5 and date not in off:
-            n_days[date.weekday()] += 1
+    n_days = business_days(2018).astype(float)
     counts = np.zeros((5, 24))
     np.add.at(counts, (od["dow"].to_numpy(), od["t_15min"].to_numpy() // 4), od["n_trips"].to_numpy())
     weekdays = counts / n_days[:, None]
