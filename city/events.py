@@ -16,7 +16,9 @@ JSON: a list of event objects, or an object whose ``results`` is that list
 position as ``location: [lon, lat]`` (PredictHQ order), ``geo.geometry``
 (a GeoJSON point) or ``lat``/``lon`` fields, and optionally ``venue`` (or a
 PredictHQ ``entities`` item of type ``venue``), ``attendance`` (or
-``phq_attendance``), ``timezone`` and ``reviews`` (a list of strings).
+``phq_attendance``), ``timezone`` and ``reviews`` (a list of strings).  JSON events of a category
+outside :data:`CATEGORIES` (PredictHQ has more) are skipped with a warning
+naming them; in CSV an unknown category is an error.
 
 Times with a UTC offset are converted to local wall-clock time in the event's
 ``timezone`` (default America/New_York); times without one are local.
@@ -129,13 +131,20 @@ def read_events(
     Raises
     ------
     DataError
-        A missing field, unknown category, bad time or position, naming file and row.
+        A missing field, unknown category (CSV), bad time or position, naming file and row.
     """
     from city.csvio import nearest_nodes
 
     path = Path(path)
-    records = _json_records(path) if _is_json(path) else _csv_records(path)
+    is_json = _is_json(path)
+    records = _json_records(path) if is_json else _csv_records(path)
     extra = read_reviews(reviews) if reviews is not None else {}
+    if is_json:  # PredictHQ has more categories than the paper's: skip those, say which
+        unknown = [(line, str(rec.get("category"))) for line, rec in records if rec.get("category") not in (None, "") and rec.get("category") not in CATEGORIES]
+        if unknown:
+            names = ", ".join(sorted({c for _, c in unknown}))
+            warnings.warn(f"{path}: skipped {len(unknown)} events of categories outside {', '.join(CATEGORIES)} ({names}; first at row {unknown[0][0]})", stacklevel=2)
+            records = [(line, rec) for line, rec in records if rec.get("category") in (None, "") or rec.get("category") in CATEGORIES]
     parsed = [_parse_event(rec, line, path, tz) for line, rec in records]
     if not parsed:
         return []
