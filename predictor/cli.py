@@ -41,6 +41,7 @@ def add_parser(subparsers) -> None:
     e.add_argument("--cache", default=None, help="embedding cache root")
     e.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples of test days for the 95%% intervals")
     e.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
+    e.add_argument("--part", choices=("test", "val"), default="test", help="months to score: test (Sep-Dec, the figures) or val (Jul-Aug, for design choices)")
     e.set_defaults(func=eval_main)
 
     from bus.session import add_session_args
@@ -134,7 +135,7 @@ def eval_main(args) -> int:
     world, _ = world_for_model(model.meta, args.model, args.data)
     lead, lag = model.window
     data = build_year_data(world, model.featurizer(args.cache), lead=lead, lag=lag, verbose=False)
-    result = evaluate(model, data, n_boot=args.bootstrap, seed=args.seed)
+    result = evaluate(model, data, part=args.part, n_boot=args.bootstrap, seed=args.seed)
     result["model"] = str(Path(args.model).resolve())
     result["scenario"] = sc
     result["inputs"] = model.meta.get("inputs") or {}
@@ -143,6 +144,7 @@ def eval_main(args) -> int:
         write_json(result, args.json)
         print(f"wrote {args.json}")
     if args.plot:
-        plot(result, args.plot, title=f"Demand prediction PE, {sc['name']}, test months Sep-Dec {data.year}")
+        months = "test months Sep-Dec" if args.part == "test" else "validation months Jul-Aug"
+        plot(result, args.plot, title=f"Demand prediction PE, {sc['name']}, {months} {data.year}")
         print(f"wrote {args.plot}")
     return 0

@@ -6,7 +6,7 @@ Base features f (both networks; paper §4.2.1 "temporal and spatial data"):
 * day of week, one-hot (7)
 * month as a point on the unit circle, ``sin/cos(2π (month-1)/12)`` (2).  A
   one-hot month would leave the test months (Sep–Dec) with untrained weights,
-  because the networks train on Jan–Aug only; the cyclic code at least lets
+  because the networks train on Jan–Jun only; the cyclic code at least lets
   them interpolate the seasonal trend.
 * US federal holiday flag (1), computed by :mod:`predictor.holidays`
 * weather: temperature (°F), precipitation (in), wind (mph), z-scored with the
@@ -27,7 +27,10 @@ the end (departures): on the synthetic world the literal rule covers only 16 %
 of the surge trips at 17 h and 49 % at 19 h.  surge therefore counts an event
 in its venue's sector for every hour that overlaps
 ``[start - LEAD_HOURS, end + LAG_HOURS)`` (2 h and 1 h by default, recorded in
-the model), which covers 76–92 % of the surge at 15–21 h.  Adjacent sectors
+the model), which covers 76–92 % of the surge at 15–21 h.  (These shares
+were measured on the whole year of the earlier synthetic world, before the
+validation split existed; a new choice of window must be made on the
+validation months, ``surge predictor eval --part val``.)  Adjacent sectors
 (where many arrivals are picked up) are not included: that would make 60 % of
 evening sector-hours "event" hours and quadruple the event network's
 training set.  Each of

@@ -400,3 +400,36 @@ def test_malformed_event_file_clear_error(tmp_path: Path, world: TinyWorld) -> N
         read_events(bad, world.city)
     msg = str(info.value)
     assert "events.csv" in msg and "row" in msg, msg
+
+
+def test_model_forecasts_from_the_events_it_was_trained_with(world: TinyWorld, trained: Path, tmp_path: Path) -> None:
+    """A model trained with --events forecasts from that file's events, not the world's; a changed file is refused."""
+    import shutil
+
+    from city.errors import ConfigError
+    from predictor.forecast import ModelForecaster
+    from predictor.inputs import record_inputs
+
+    lon, lat = np.meshgrid(-73.990 + 0.001 * np.arange(4), 40.755 + 0.001 * np.arange(4))
+    xy, u, v = grid_edges(4)
+    city = City.build("tiny-lonlat", np.column_stack([lon.ravel(), lat.ravel()]), u, v, np.full(len(u), 100.0), (xy[:, 0] >= 200).astype(int), ["west", "east"], crs="lonlat")
+
+    class Quiet:  # the served world: same sectors and weather, no events of its own
+        def __init__(self) -> None:
+            self.city, self.weather, self.locale_counts, self.events = city, world.weather, world.locale_counts, []
+
+    events = tmp_path / "events.json"
+    events.write_text(json.dumps([{"id": "gig", "title": "Sold-out stadium concert", "description": "Huge crowds expected", "category": "concerts",
+                                   "start": "2022-10-14 19:00", "end": "2022-10-14 21:00", "lat": 40.7555, "lon": -73.9895}]))
+    model_dir = tmp_path / "model"
+    shutil.copytree(trained, model_dir)
+    meta = json.loads((model_dir / "model.json").read_text())
+    meta["inputs"] = record_inputs(model_dir, events=str(events))
+    (model_dir / "model.json").write_text(json.dumps(meta))
+    when = dt.datetime(2022, 10, 14, 19)
+    _, has_world = ModelForecaster(trained).predict_counts(Quiet(), when)
+    _, has_file = ModelForecaster(model_dir).predict_counts(Quiet(), when)
+    assert not has_world.any() and has_file.tolist() == [True, False]
+    events.write_text(events.read_text().replace("Huge", "Small"))
+    with pytest.raises(ConfigError, match="changed since the model"):
+        ModelForecaster(model_dir).predict_counts(Quiet(), when)
