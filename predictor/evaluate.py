@@ -16,7 +16,10 @@ the window, one prediction per row of the ablation:
   the text feature F_s) where the sector has active events, else the
   no-event network (temporal/weather, fitted on sector-hours without events);
 * ``true_rate``: the noise floor, the world's own expected rate λ (the
-  synthetic world knows it; a recorded world does not, and the row is absent);
+  synthetic world knows it; a recorded world does not, and the row is absent).
+  λ is the best forecast in squared error, not in PE: |y - ŷ|/y weighs
+  low counts more, so a forecast biased below λ can score a lower PE, and
+  a network may land under this "floor" at quiet hours;
 * ``previous_hour``: the realised count of hour h-1 in the same sector
   (Garces et al. 2023).
 
