@@ -2,7 +2,7 @@
 
 In both worlds every event is at the same venue, of the same category, at the
 same hours, so the metadata network (event count, categories, capacities) sees
-identical inputs for every event.  Half the events, drawn at random, triple the
+identical inputs for every event.  There is one every evening; half of them, drawn at random, triple the
 evening demand around them; the rest add a fifth.  In the planted world the
 description says which (a sold-out stadium show or a quiet acoustic set); in
 the noise world the same descriptions are assigned by an independent coin.
@@ -33,7 +33,7 @@ VENUE_REVIEWS = ("Easy to reach by subway", "Clean venue, friendly staff", "Bars
 
 
 class TextSignalWorld:
-    """Two sectors, one venue, an event every other evening; text planted or noise (see the module notes)."""
+    """Two sectors, one venue, an event every evening; text planted or noise (see the module notes)."""
 
     def __init__(self, planted: bool, year: int = 2022, seed: int = 3) -> None:
         rng = np.random.default_rng(seed)
@@ -43,14 +43,16 @@ class TextSignalWorld:
         self.year, self.seed = year, seed
         H = hours_in_year(year)
         hrs = np.arange(H) % 24
-        self.weather = HourlyWeather(year, 50 + 20 * np.sin(np.arange(H) / H * 2 * np.pi), rng.exponential(0.01, H), rng.uniform(0, 15, H), "tiny")
+        # Flat weather: no seasonal trend for small networks to extrapolate from January-June into the
+        # validation and test months, so the two worlds differ in their text alone.
+        self.weather = HourlyWeather(year, np.full(H, 60.0), np.zeros(H), np.full(H, 5.0), "tiny")
         self.locale_counts = rng.integers(1, 4, size=(self.city.n_nodes, 4)).astype(float)
         self.venues = [Venue("arena", "Arena", 0, 0, 5000, "arena")]
         base = 20 + 15 * np.sin((hrs - 6) / 24 * 2 * np.pi).clip(0)
         rate = np.stack([base, 0.6 * base], axis=1)
         self.events: list[Event] = []
         self.big: list[bool] = []
-        for k, day in enumerate(range(1, 364, 2)):
+        for k, day in enumerate(range(1, 364)):
             big = bool(rng.random() < 0.5)
             self.big.append(big)
             says_big = big if planted else bool(rng.random() < 0.5)
@@ -94,12 +96,12 @@ def _text_gain(planted: bool, tmp_path) -> dict:
     from predictor.train import TrainConfig
 
     world = TextSignalWorld(planted)
-    cfg = TrainConfig(epochs=3, lr=3e-3, batch_size=64, seed=0, patience=8)
-    model = train_model(world, tmp_path, cfg=cfg, standard_hidden=(16, 16), event_hidden=(64, 64), event_epochs=80, scenario={"name": "tiny"}, beta_days=2, log=None)
+    cfg = TrainConfig(epochs=3, lr=1e-3, batch_size=64, seed=0, patience=25)
+    model = train_model(world, tmp_path, cfg=cfg, standard_hidden=(16, 16), event_hidden=(64, 64), event_epochs=300, scenario={"name": "tiny"}, beta_days=2, log=None)
     data = build_year_data(world, model.featurizer())
     res = evaluate(model, data, n_boot=400)
     row = res["pooled"]["event_sector_hours"]
-    assert row["n"] > 200 and model.meta["networks"]["metadata"]["n_train"] > 300
+    assert row["n"] > 400 and model.meta["networks"]["metadata"]["n_train"] > 600
     return row
 
 
