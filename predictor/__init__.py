@@ -11,13 +11,15 @@ Modules
 embed       sentence embeddings with an on-disk cache (torch only inside ``Embedder.model``)
 cluster     spectral clustering of review embeddings -> R_w (numpy/scikit-learn)
 features    temporal/weather/sector features and the sector event feature F_s
-dataset     builds the year's training and test arrays from a demand world
+dataset     the year's arrays from a demand world; the train/validation/test split
 nets        the feed-forward networks (torch)
-train       training with per-epoch checkpoints and resume (torch)
-evaluate    the paper's percent-error ablation (event system, standard NN, previous hour)
+train       training with early stopping on validation loss, checkpoints and resume (torch)
+evaluate    the ablation: standard, metadata, shuffled-text and event networks, noise floor,
+            previous hour; percent error per hour with bootstrap CIs
+inputs      the world and user files (events, reviews, trips) a model was trained with
 assign      demand assignment: occupancy-based rho/delta and historical beta
 forecast    ModelForecaster / load_forecaster for the rollout agents
-cli         ``surge predictor train|eval``
+cli         ``surge predictor train|eval|serve``
 """
 
 __all__ = ["__version__"]

@@ -5,10 +5,11 @@
   sector's pickup intersections.  The paper uses the same O for pickup and
   drop-off, so ρ = δ here.
 * β: relative frequency of drop-off sector given pickup sector in historical
-  trips.  From a :class:`city.trips.TripTable` when one is given; otherwise
-  from the world's own requests on ``days`` randomly drawn days of the
-  training months (all 24 hours of each).  Pickup sectors without trips get a
-  uniform row.
+  trips of the training months only (January–June: validation and test months
+  never enter).  From a :class:`city.trips.TripTable` when one is given (its
+  trips requested in the training months); otherwise from the world's own
+  requests on ``days`` randomly drawn days of the training months (all 24
+  hours of each).  Pickup sectors without trips get a uniform row.
 """
 
 from __future__ import annotations
@@ -39,10 +40,13 @@ def estimate_beta(world, *, days: int = 28, seed: int = 0, trips=None) -> tuple[
     """β ``(S, S)`` (rows sum to 1) and a description of where it came from."""
     city = world.city
     S = int(city.n_sectors)
-    if trips is not None:
-        beta = od_frequencies(trips.pickup_sector, trips.dropoff_sector, S)
-        return beta, {"source": "trip table", "trips": int(len(trips.pickup_sector))}
     year = int(world.year)
+    if trips is not None:
+        t = np.asarray(trips.request_time).astype("datetime64[m]")
+        keep = (t >= np.datetime64(f"{year}-01-01", "m")) & (t < np.datetime64(dt.date(year, TRAIN_MONTHS + 1, 1).isoformat(), "m"))
+        pu, do = np.asarray(trips.pickup_sector)[keep], np.asarray(trips.dropoff_sector)[keep]
+        beta = od_frequencies(pu, do, S)
+        return beta, {"source": "trip table", "trips": int(keep.sum()), "trips_outside_training_months": int((~keep).sum()), "months": f"1-{TRAIN_MONTHS}"}
     first = dt.date(year, 1, 1)
     n_train_days = (dt.date(year, TRAIN_MONTHS + 1, 1) - first).days
     rng = np.random.default_rng(seed)

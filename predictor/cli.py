@@ -16,8 +16,13 @@ def add_parser(subparsers) -> None:
     t.add_argument("--scenario", default="synthetic", help="synthetic, nyc, manhattan or a scenario .toml file")
     t.add_argument("--data", default=None, help="data directory laid out like shared/data (for nyc, manhattan)")
     t.add_argument("--out", required=True, help="model directory to write (and resume from)")
-    t.add_argument("--epochs", type=int, default=100, help="epochs for every network (paper: 100)")
-    t.add_argument("--event-epochs", type=int, default=None, help="epochs for the event network only (default: --epochs)")
+    t.add_argument("--epochs", type=int, default=100, help="cap on the epochs of every network (paper: 100); each stops earlier on validation loss")
+    t.add_argument("--event-epochs", type=int, default=None, help="epoch cap of the event-sector networks only (default: --epochs)")
+    t.add_argument("--patience", type=int, default=10, help="stop a network this many epochs after its best validation loss (0: run the whole cap, keep the best epoch)")
+    t.add_argument("--hidden", type=_widths, default=None, help="hidden widths of the standard and no-event networks, e.g. 256,256 (the paper's default)")
+    t.add_argument("--event-hidden", type=_widths, default=None, help="hidden widths of the event-sector networks, e.g. 4096,4096 (the paper's default)")
+    t.add_argument("--no-ablation", action="store_true", help="train only the system's networks (skip the metadata and shuffled-text networks)")
+    t.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help="embedding and training device (auto: CUDA where present)")
     t.add_argument("--encoder", default=None, help="sentence-transformers model name or path (default: bundled all-MiniLM-L6-v2)")
     t.add_argument("--seed", type=int, default=0, help="torch seed (initialisation and shuffles)")
     t.add_argument("--world-seed", type=int, default=0, help="seed of the synthetic demand world")
@@ -28,12 +33,15 @@ def add_parser(subparsers) -> None:
     t.add_argument("--trips", nargs="+", default=None, help="HV-FHV trip parquet files: real hourly counts and β instead of the world's")
     t.set_defaults(func=train_main)
 
-    e = sub.add_parser("eval", help="percent error per hour 15-21 h: the event system vs the standard NN vs previous hour")
+    e = sub.add_parser("eval", help="the ablation on the test months: percent error per hour 15-21 h of every network and baseline, with 95% CIs")
     e.add_argument("--model", required=True, help="trained model directory")
     e.add_argument("--json", default=None, help="write results as JSON here")
     e.add_argument("--plot", default=None, help="write a PNG line chart here")
     e.add_argument("--data", default=None, help="override the data directory recorded in the model")
     e.add_argument("--cache", default=None, help="embedding cache root")
+    e.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples of test days for the 95%% intervals")
+    e.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
+    e.add_argument("--part", choices=("test", "val"), default="test", help="months to score: test (Sep-Dec, the figures) or val (Jul-Aug, for design choices)")
     e.set_defaults(func=eval_main)
 
     from bus.session import add_session_args
@@ -59,71 +67,31 @@ def serve_cmd(args) -> int:
     return 0
 
 
-# ----------------------------------------------------------------- worlds
-class _RealInputsWorld:
-    """A demand world whose events and/or hourly counts come from user files."""
+def _widths(text: str) -> tuple[int, ...]:
+    import argparse
 
-    def __init__(self, base, events=None, trips=None) -> None:
-        self._base = base
-        self._events = events
-        self._trips = trips
-
-    def __getattr__(self, name):
-        return getattr(self._base, name)
-
-    @property
-    def events(self):
-        return self._events if self._events is not None else self._base.events
-
-    def events_active(self, when):
-        if self._events is None:
-            return self._base.events_active(when)
-        return [ev for ev in self._events if ev.active(when)]
-
-    def hourly_counts(self):
-        if self._trips is None:
-            return self._base.hourly_counts()
-        from city.trips import hourly_counts
-
-        return hourly_counts(self._trips, int(self._base.year), int(self._base.city.n_sectors))
-
-
-def load_world(scenario: str, data_dir: str | None, *, seed: int = 0, year: int = 2022, events: str | None = None, reviews: str | None = None, trips=None):
-    from city.scenario import load_scenario
-
-    world = load_scenario(scenario, data_dir, year=year, seed=seed).world
-    ev = tr = None
-    if events:
-        ev = read_event_file(Path(events), world.city, Path(reviews) if reviews else None)
-    if trips:
-        from city.trips import read_fhvhv
-
-        tr = read_fhvhv([Path(p) for p in trips], world.city)
-    if ev is not None or tr is not None:
-        world = _RealInputsWorld(world, ev, tr)
-    return world, tr
-
-
-def read_event_file(path: Path, city, reviews: Path | None = None) -> list:
-    """Events from a user file: the NYC permitted-events CSV, or surge's CSV/JSON listing."""
-    from city.events import read_events, read_permitted_events
-
-    if not path.is_file():
-        raise ConfigError(f"--events: {path} does not exist")
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        head = fh.readline()
-    if "Event ID" in head and "Event Borough" in head:
-        return read_permitted_events(path, city)
-    return read_events(path, city, reviews)
+    try:
+        out = tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of widths") from None
+    if not out or min(out) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: widths must be positive integers")
+    return out
 
 
 # ---------------------------------------------------------------- handlers
 def train_main(args) -> int:
+    from predictor.inputs import load_world, record_inputs
     from predictor.model import train_model
+    from predictor.nets import EVENT_HIDDEN, STANDARD_HIDDEN
     from predictor.train import TrainConfig, log_line
 
     if args.epochs < 0:
         raise ConfigError("--epochs must be >= 0")
+    if args.patience < 0:
+        raise ConfigError("--patience must be >= 0")
+    if args.reviews and not args.events:
+        raise ConfigError("--reviews needs --events (the reviews are of those events)")
     t0 = time.perf_counter()
     world, trips = load_world(args.scenario, args.data, seed=args.world_seed, year=args.year, events=args.events, reviews=args.reviews, trips=args.trips)
     log_line(f"world: scenario {args.scenario}, {world.city.n_sectors} sectors, {len(world.events)} events, built in {time.perf_counter() - t0:.1f}s")
@@ -132,52 +100,51 @@ def train_main(args) -> int:
         "data_dir": str(Path(args.data).resolve()) if args.data else None,
         "world_seed": args.world_seed,
         "year": args.year,
-        "events": str(Path(args.events).resolve()) if args.events else None,
-        "reviews": str(Path(args.reviews).resolve()) if args.reviews else None,
-        "trips": [str(Path(p).resolve()) for p in args.trips] if args.trips else None,
     }
-    cfg = TrainConfig(epochs=args.epochs, seed=args.seed)
-    model = train_model(
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    inputs = record_inputs(args.out, events=args.events, reviews=args.reviews, trips=args.trips)
+    cfg = TrainConfig(epochs=args.epochs, seed=args.seed, patience=args.patience, device=args.device)
+    train_model(
         world,
         args.out,
         cfg=cfg,
         encoder=args.encoder,
         cache_dir=args.cache,
         scenario=scenario,
+        inputs=inputs,
+        trips=trips,
+        standard_hidden=args.hidden or STANDARD_HIDDEN,
+        event_hidden=args.event_hidden or EVENT_HIDDEN,
         event_epochs=args.event_epochs,
+        ablation=not args.no_ablation,
         log=log_line,
     )
-    if trips is not None:
-        from predictor.assign import estimate_beta
-
-        model.beta, info = estimate_beta(world, trips=trips)
-        model.meta["beta"] = info
-        model.save(Path(args.out))
     return 0
 
 
 def eval_main(args) -> int:
     from predictor.dataset import build_year_data
     from predictor.evaluate import evaluate, format_table, plot, write_json
+    from predictor.inputs import world_for_model
     from predictor.model import DemandModel
 
+    if args.bootstrap < 1:
+        raise ConfigError("--bootstrap must be >= 1")
     model = DemandModel.load(args.model)
     sc = model.meta.get("scenario") or {}
-    if not sc.get("name"):
-        raise ConfigError(f"{args.model}: model.json records no scenario to evaluate on")
-    world, _ = load_world(
-        sc["name"], args.data or sc.get("data_dir"), seed=int(sc.get("world_seed", 0)), year=int(sc.get("year", 2022)), events=sc.get("events"), reviews=sc.get("reviews"), trips=sc.get("trips")
-    )
+    world, _ = world_for_model(model.meta, args.model, args.data)
     lead, lag = model.window
     data = build_year_data(world, model.featurizer(args.cache), lead=lead, lag=lag, verbose=False)
-    result = evaluate(model, data)
+    result = evaluate(model, data, part=args.part, n_boot=args.bootstrap, seed=args.seed)
     result["model"] = str(Path(args.model).resolve())
     result["scenario"] = sc
+    result["inputs"] = model.meta.get("inputs") or {}
     print(format_table(result))
     if args.json:
         write_json(result, args.json)
         print(f"wrote {args.json}")
     if args.plot:
-        plot(result, args.plot, title=f"Demand prediction PE, {sc['name']} test months Sep-Dec {data.year}")
+        months = "test months Sep-Dec" if args.part == "test" else "validation months Jul-Aug"
+        plot(result, args.plot, title=f"Demand prediction PE, {sc['name']}, {months} {data.year}")
         print(f"wrote {args.plot}")
     return 0

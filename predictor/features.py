@@ -6,7 +6,7 @@ Base features f (both networks; paper §4.2.1 "temporal and spatial data"):
 * day of week, one-hot (7)
 * month as a point on the unit circle, ``sin/cos(2π (month-1)/12)`` (2).  A
   one-hot month would leave the test months (Sep–Dec) with untrained weights,
-  because the networks train on Jan–Aug only; the cyclic code at least lets
+  because the networks train on Jan–Jun only; the cyclic code at least lets
   them interpolate the seasonal trend.
 * US federal holiday flag (1), from :func:`city.calendar.holidays_for`
 * weather: temperature (°F), precipitation (in), wind (mph), z-scored with the
@@ -27,7 +27,10 @@ the end (departures): on the synthetic world the literal rule covers only 16 %
 of the surge trips at 17 h and 49 % at 19 h.  surge therefore counts an event
 in its venue's sector for every hour that overlaps
 ``[start - LEAD_HOURS, end + LAG_HOURS)`` (2 h and 1 h by default, recorded in
-the model), which covers 76–92 % of the surge at 15–21 h.  Adjacent sectors
+the model), which covers 76–92 % of the surge at 15–21 h.  (These shares
+were measured on the whole year of the earlier synthetic world, before the
+validation split existed; a new choice of window must be made on the
+validation months, ``surge predictor eval --part val``.)  Adjacent sectors
 (where many arrivals are picked up) are not included: that would make 60 % of
 evening sector-hours "event" hours and quadruple the event network's
 training set.  Each of
@@ -174,17 +177,84 @@ class EventFeaturizer:
             self.prepare([ev])
         return self._vectors[ev.event_id]
 
-    def sector_feature(self, events: Sequence) -> np.ndarray:
-        """F_s = [ẑ_s, R̂_s] for the events active in one sector and hour."""
+    def sector_feature(self, events: Sequence, swap: dict[str, object] | None = None) -> np.ndarray:
+        """F_s = [ẑ_s, R̂_s] for the events active in one sector and hour.
+
+        ``swap`` maps an event id to the event whose text stands in for it
+        (the shuffled-text control of the ablation, :func:`shuffled_texts`).
+        """
         d = self.d
         out = np.zeros((self.b + 1) * d, dtype=np.float32)
         if not events:
             return out
+        if swap is not None:
+            events = [swap.get(ev.event_id, ev) for ev in events]
         vs = [self.vectors(ev) for ev in events]
         out[:d] = np.mean([v.z for v in vs], axis=0)
         with_rev = [v.R for v in vs if v.has_reviews]
         if with_rev:
             out[d:] = np.mean(with_rev, axis=0).ravel()
+        return out
+
+
+def shuffled_texts(events: Sequence, seed: int = 0) -> dict[str, object]:
+    """A fixed random permutation of the events' texts: event id -> the event whose text it gets.
+
+    The shuffled-text control keeps every event where and when it is, and keeps
+    the distribution of texts, but breaks the link between an event and what
+    its text says.
+    """
+    evs = sorted(events, key=lambda e: e.event_id)
+    perm = np.random.default_rng([seed, 7919]).permutation(len(evs))
+    return {ev.event_id: evs[int(j)] for ev, j in zip(evs, perm)}
+
+
+class MetadataFeaturizer:
+    """Event metadata of a sector-hour, with no text: the metadata network's input.
+
+    Columns: the number of active events; per category of
+    :data:`city.events.CATEGORIES` (and one for any other) the number of
+    active events; ``log1p`` of the summed and of the largest venue capacity
+    of the active events; the number whose venue capacity is unknown.  The
+    capacity is the venue's (``world.venues``), announced before the event;
+    realised attendance never enters.
+    """
+
+    def __init__(self, capacity: dict[str, float] | None = None) -> None:
+        from city.events import CATEGORIES
+
+        self.categories = tuple(CATEGORIES)
+        self.capacity = dict(capacity or {})
+
+    @classmethod
+    def from_world(cls, world) -> "MetadataFeaturizer":
+        venues = getattr(world, "venues", None) or []
+        return cls({str(v.venue_id): float(v.capacity) for v in venues if getattr(v, "capacity", None)})
+
+    @property
+    def names(self) -> list[str]:
+        return ["n_events"] + [f"n_{c}" for c in self.categories] + ["n_other_category", "log1p_capacity_sum", "log1p_capacity_max", "n_capacity_unknown"]
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+    def sector_feature(self, events: Sequence) -> np.ndarray:
+        K = len(self.categories)
+        out = np.zeros(self.size, dtype=np.float32)
+        out[0] = len(events)
+        caps = []
+        for ev in events:
+            k = self.categories.index(ev.category) if ev.category in self.categories else K
+            out[1 + k] += 1
+            cap = self.capacity.get(str(ev.venue_id))
+            if cap is None:
+                out[K + 4] += 1
+            else:
+                caps.append(cap)
+        if caps:
+            out[K + 2] = np.log1p(sum(caps))
+            out[K + 3] = np.log1p(max(caps))
         return out
 
 

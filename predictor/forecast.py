@@ -7,7 +7,13 @@
   where the sector has an active event, else the no-event network);
 * ``rho``, ``delta`` ``(n,)``: pickup / drop-off intersection probabilities,
   each summing to 1 within every sector (occupancy-based assignment);
-* ``beta`` ``(S, S)``: drop-off sector given pickup sector (historical).
+* ``beta`` ``(S, S)``: drop-off sector given pickup sector (historical, the
+  training months of the data the model was trained with).
+
+Events: a model trained with ``--events FILE`` forecasts from the events of
+that file (found again through ``model.json``, its SHA-256 checked), not from
+the world's own synthetic events; a model trained on the world's events uses
+the world's.
 
 It returns the rollout's torch-free ``agents.forecast.Forecast``.
 """
@@ -34,6 +40,18 @@ class ModelForecaster:
         self.cache_dir = cache_dir
         self._featurizer = None
         self._beta: dict[int, np.ndarray] = {}
+        self._events: dict[int, list | None] = {}
+
+    def events_for(self, world) -> list:
+        """The events the model was trained with: the recorded ``--events`` file's, else the world's."""
+        key = id(world.city)
+        if key not in self._events:
+            from predictor.inputs import recorded_events
+
+            directory = self.model.directory if self.model.directory is not None else Path(".")
+            self._events[key] = recorded_events(self.model.meta, directory, world.city)
+        ev = self._events[key]
+        return list(world.events) if ev is None else ev
 
     @property
     def featurizer(self):
@@ -59,7 +77,7 @@ class ModelForecaster:
         when = when.replace(minute=0, second=0, microsecond=0)
         by_sector: dict[int, list] = {}
         lead, lag = self.model.window
-        for ev in active_events(world, when, lead, lag):
+        for ev in active_events(_Listing(self.events_for(world)), when, lead, lag):
             if 0 <= int(ev.sector) < S:
                 by_sector.setdefault(int(ev.sector), []).append(ev)
         has = np.zeros(S, dtype=bool)
@@ -83,6 +101,13 @@ class ModelForecaster:
             delta=p.copy(),
             beta=self.beta_for(world),
         )
+
+
+class _Listing:
+    """Just the ``events`` of a world, for :func:`predictor.features.active_events`."""
+
+    def __init__(self, events: list) -> None:
+        self.events = events
 
 
 def load_forecaster(model_dir: str | Path, cache_dir: str | None = None) -> ModelForecaster:

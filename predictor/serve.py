@@ -46,6 +46,8 @@ class ForecastService:
         self.keys = Keys(config.run)
         self.provider = make_provider(config.forecast, config.model)
         self.world = load_scenario(config.scenario, config.data_dir, seed=config.world_seed).world
+        if config.forecast == "model" and config.model is not None:
+            self.world = _world_for_model(config, self.world)
         self.answered = 0
 
     def answer(self, payload: bytes) -> bytes:
@@ -78,6 +80,29 @@ class ForecastService:
                         query.drop()  # the querier's get() ends now, not when this object is collected
             finally:
                 queryable.undeclare()
+
+
+def _world_for_model(config: ServeConfig, world):
+    """The served world with the model's recorded events and trips in place of the scenario's own.
+
+    The forecasts come from the model's events anyway (:class:`predictor.forecast.ModelForecaster`);
+    swapping them in here also refuses, in one line, a recorded file that is gone or changed, before
+    the first query, and a model trained on another scenario.
+    """
+    import json
+    from pathlib import Path
+
+    from city.errors import ConfigError
+    from predictor.inputs import RealInputsWorld, read_event_file, recorded_paths
+
+    meta = json.loads((Path(config.model) / "model.json").read_text())
+    trained = (meta.get("scenario") or {}).get("name")
+    if trained and trained != config.scenario:
+        raise ConfigError(f"the model in {config.model} was trained on scenario {trained!r}, not {config.scenario!r}")
+    paths = recorded_paths({"inputs": {k: v for k, v in (meta.get("inputs") or {}).items() if k != "trips"}}, config.model)
+    if paths["events"] is None:
+        return world
+    return RealInputsWorld(world, read_event_file(paths["events"], world.city, paths["reviews"]))
 
 
 def serve_main(config: ServeConfig, bus: SessionArgs) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -187,7 +188,7 @@ def trained(world: TinyWorld, cache: Path, tmp_path_factory) -> Path:
     from predictor.train import TrainConfig
 
     out = tmp_path_factory.mktemp("model")
-    train_model(world, out, cfg=TrainConfig(epochs=2, lr=1e-3, seed=0), cache_dir=str(cache), standard_hidden=(32, 32), event_hidden=(64, 64), scenario={"name": "tiny"}, beta_days=3, log=None)
+    train_model(world, out, cfg=TrainConfig(epochs=2, lr=1e-3, seed=0, device="auto"), cache_dir=str(cache), standard_hidden=(32, 32), event_hidden=(64, 64), scenario={"name": "tiny"}, beta_days=3, log=None)
     return out
 
 
@@ -202,7 +203,7 @@ def test_no_event_network_never_sees_event_hours(world: TinyWorld, cache: Path) 
     _, y_quiet = standard_training_set(data, norm, without_events=True)
     _, y_event = event_training_set(data, norm)
     assert len(y_event) > 0 and len(y_quiet) + len(y_event) == len(y_all)
-    has = data.has_event()[: data.split_hour].ravel()
+    has = data.has_event()[: data.val_hour].ravel()
     assert np.array_equal(y_quiet, y_all[~has])
 
 
@@ -224,9 +225,158 @@ def test_saved_model_predicts_identically(world: TinyWorld, trained: Path, cache
     quiet = m1.predict_no_event(data.temporal[hours], data.weather[hours], np.tile(np.arange(S), H - H0)).reshape(H - H0, S)
     assert np.array_equal(p1["event_nn"][~has], quiet[~has])  # the system's no-event network outside events
     assert not np.array_equal(quiet, p1["standard_nn"])
-    res = evaluate(m1, data)
+    res = evaluate(m1, data, n_boot=200)
     assert [r["hour"] for r in res["rows"]] == list(range(15, 22))
     assert all(r["n"] > 0 and np.isfinite(r["pe_event_nn"]) for r in res["rows"])
+
+
+def test_ablation_rows_and_intervals(world: TinyWorld, trained: Path, cache: Path, tmp_path: Path) -> None:
+    from predictor.dataset import build_year_data
+    from predictor.evaluate import ROWS, evaluate, format_table, percent_error, plot, write_json
+    from predictor.model import DemandModel
+
+    model = DemandModel.load(trained)
+    assert set(model.meta["networks"]) == {"standard", "no_event", "event", "metadata", "event_shuffled"}
+    data = build_year_data(world, model.featurizer(str(cache)))
+    res = evaluate(model, data, n_boot=300, seed=1)
+    assert res["schema"] == "surge.predictor.eval/1" and res["predictors"] == [k for k, _ in ROWS]
+    S = data.n_sectors
+    test = data.hours("test")
+    assert sum(r["n"] > 0 for r in res["rows_event_sectors"]) >= 4
+    for rows in (res["rows"], res["rows_event_sectors"]):
+        for r in rows:
+            if r["n"] == 0:  # no event sector-hours at this hour: no estimate
+                assert np.isnan(r["pe_event_nn"])
+                continue
+            for k in res["predictors"]:
+                lo, hi = r[f"ci_{k}"]
+                assert lo <= r[f"pe_{k}"] <= hi, (k, r)
+            assert lo < hi
+            assert r["diff_metadata_nn"]["ci"][0] <= r["diff_metadata_nn"]["mean"] <= r["diff_metadata_nn"]["ci"][1]
+    # the noise floor is the world's own λ, scored like the rest
+    idx = np.array([h for h in test if h % 24 == 19])
+    y = data.counts[idx].ravel()
+    lam = world.expected_rate()[idx].ravel()
+    pe, n = percent_error(y, lam, np.tile(np.arange(S), len(idx)), S)
+    row19 = res["rows"][19 - 15]
+    assert row19["pe_true_rate"] == pytest.approx(pe) and row19["n"] == n
+    again = evaluate(model, data, n_boot=300, seed=1)
+    assert json.dumps(again) == json.dumps(res)  # one seed, one result (NaN where no event sector-hours)
+    assert "event_nn minus" in format_table(res)
+    write_json(res, tmp_path / "pe.json")
+    plot(res, tmp_path / "pe.png", title="tiny")
+    assert (tmp_path / "pe.png").stat().st_size > 1000
+
+
+def test_splits_are_disjoint_and_cover_the_year(world: TinyWorld, cache: Path) -> None:
+    from predictor.assign import estimate_beta
+    from predictor.dataset import Normaliser, build_year_data, event_training_set, standard_training_set
+    from predictor.embed import Embedder
+    from predictor.features import EventFeaturizer, year_hours
+
+    data = build_year_data(world, EventFeaturizer(Embedder(None, cache)))
+    parts = {p: data.hours(p) for p in ("train", "val", "test")}
+    when = year_hours(data.year)
+    months = {p: {when[h].month for h in r} for p, r in parts.items()}
+    assert months == {"train": set(range(1, 7)), "val": {7, 8}, "test": set(range(9, 13))}
+    sets = [set(r) for r in parts.values()]
+    assert not (sets[0] & sets[1]) and not (sets[0] & sets[2]) and not (sets[1] & sets[2])
+    assert set().union(*sets) == set(range(data.n_hours))
+    rows = [set(data.event_rows(p).tolist()) for p in parts]
+    assert sum(map(len, rows)) == len(data.ev_hour) and not (rows[0] & rows[1]) and not (rows[1] & rows[2])
+    # nothing outside the training months shapes the networks' inputs or targets
+    norm = Normaliser.fit(data)
+    later = data.val_hour
+    data.counts = data.counts.copy()
+    data.counts[later:] *= 7
+    data.weather = data.weather.copy()
+    data.weather[later:] += 40
+    data.ev_F = data.ev_F.copy()
+    data.ev_F[data.ev_hour >= later] += 1.0
+    assert Normaliser.fit(data).to_json() == norm.to_json()
+    Xs, ys = standard_training_set(data, norm)
+    assert len(ys) == later * data.n_sectors
+    _, ye = event_training_set(data, norm)
+    assert len(ye) == len(data.event_rows("train"))
+    _, yv = standard_training_set(data, norm, part="val")
+    assert len(yv) == (data.split_hour - later) * data.n_sectors
+    # β: trips requested outside January-June do not enter
+    from city.trips import TripTable
+
+    t = np.array(["2022-03-01T10:00", "2022-03-01T11:00", "2022-10-01T10:00"], dtype="datetime64[m]")
+    trips = TripTable(t, np.array([0, 0, 0], np.int32), np.array([1, 1, 0], np.int32), 3, 0)
+    beta, info = estimate_beta(world, trips=trips)
+    assert beta[0].tolist() == [0.0, 1.0] and info["trips"] == 2 and info["trips_outside_training_months"] == 1
+
+
+def test_early_stopping_keeps_the_best_validation_epoch(tmp_path: Path) -> None:
+    import torch
+
+    from predictor.train import TrainConfig, fit
+
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(600, 8)).astype(np.float32)
+    w = rng.normal(size=8)
+    y = (X @ w + 0.5 * rng.normal(size=600)).astype(np.float32)
+    Xv = rng.normal(size=(300, 8)).astype(np.float32)
+    yv = (-(Xv @ w)).astype(np.float32)  # validation disagrees: its loss rises as training fits
+    cfg = TrainConfig(epochs=100, lr=3e-3, seed=0, patience=3)
+    res = fit("es", X, y, (16,), cfg, X_val=Xv, y_val=yv, checkpoint=tmp_path / "es.pt", log=None)
+    assert res.stopped_early and len(res.losses) == res.best_epoch + 3 < 100
+    assert res.best_epoch == int(np.argmin(res.val_losses)) + 1
+    with torch.no_grad():
+        kept = float(((res.net(torch.from_numpy(Xv)) - torch.from_numpy(yv)) ** 2).mean())
+    assert kept == pytest.approx(min(res.val_losses), rel=1e-4)
+    again = fit("es", X, y, (16,), cfg, X_val=Xv, y_val=yv, checkpoint=tmp_path / "es.pt", log=None)  # resumed: already stopped
+    assert again.resumed_from == len(res.losses) and again.best_epoch == res.best_epoch
+    assert all(torch.equal(a, b) for a, b in zip(again.net.state_dict().values(), res.net.state_dict().values()))
+
+
+def test_device_auto_falls_back_to_cpu(monkeypatch: pytest.MonkeyPatch) -> None:
+    import torch
+
+    from city.errors import ConfigError
+    from predictor.train import resolve_device
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    assert resolve_device("auto").type == "cpu"
+    with pytest.raises(ConfigError, match="no CUDA device"):
+        resolve_device("cuda")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    assert resolve_device("auto").type == "cuda"
+    with pytest.raises(ConfigError, match="choose from"):
+        resolve_device("tpu")
+
+
+def test_recorded_inputs_must_match(tmp_path: Path) -> None:
+    from city.errors import ConfigError
+    from predictor.inputs import record_inputs, recorded_paths
+
+    data, model = tmp_path / "data", tmp_path / "runs" / "m"
+    data.mkdir()
+    model.mkdir(parents=True)
+    ev = data / "events.csv"
+    ev.write_text("event_id,title\n")
+    meta = {"inputs": record_inputs(model, events=str(ev))}
+    assert meta["inputs"]["events"]["path"] == "../../data/events.csv"
+    assert recorded_paths(meta, model)["events"] == model / "../../data/events.csv"
+    moved = tmp_path / "elsewhere"
+    (tmp_path / "runs").rename(moved)  # the model moves with its data beside it: found through the absolute path
+    assert recorded_paths(meta, moved / "m")["events"].resolve() == ev.resolve()
+    ev.write_text("event_id,title\nx,changed\n")
+    with pytest.raises(ConfigError, match="changed since the model"):
+        recorded_paths(meta, moved / "m")
+    ev.unlink()
+    with pytest.raises(ConfigError, match="no longer there"):
+        recorded_paths(meta, moved / "m")
+
+
+def test_trips_with_synthetic_events_refused() -> None:
+    from city.errors import ConfigError
+    from predictor.inputs import load_world
+
+    with pytest.raises(ConfigError, match="--trips needs the real events"):
+        load_world("synthetic", None, trips=["whatever.parquet"])
 
 
 def test_forecast_and_assignment(world: TinyWorld, trained: Path, cache: Path) -> None:
@@ -256,3 +406,36 @@ def test_malformed_event_file_clear_error(tmp_path: Path, world: TinyWorld) -> N
         read_events(bad, world.city)
     msg = str(info.value)
     assert "events.csv" in msg and "row" in msg, msg
+
+
+def test_model_forecasts_from_the_events_it_was_trained_with(world: TinyWorld, trained: Path, tmp_path: Path) -> None:
+    """A model trained with --events forecasts from that file's events, not the world's; a changed file is refused."""
+    import shutil
+
+    from city.errors import ConfigError
+    from predictor.forecast import ModelForecaster
+    from predictor.inputs import record_inputs
+
+    lon, lat = np.meshgrid(-73.990 + 0.001 * np.arange(4), 40.755 + 0.001 * np.arange(4))
+    xy, u, v = grid_edges(4)
+    city = City.build("tiny-lonlat", np.column_stack([lon.ravel(), lat.ravel()]), u, v, np.full(len(u), 100.0), (xy[:, 0] >= 200).astype(int), ["west", "east"], crs="lonlat")
+
+    class Quiet:  # the served world: same sectors and weather, no events of its own
+        def __init__(self) -> None:
+            self.city, self.weather, self.locale_counts, self.events = city, world.weather, world.locale_counts, []
+
+    events = tmp_path / "events.json"
+    events.write_text(json.dumps([{"id": "gig", "title": "Sold-out stadium concert", "description": "Huge crowds expected", "category": "concerts",
+                                   "start": "2022-10-14 19:00", "end": "2022-10-14 21:00", "lat": 40.7555, "lon": -73.9895}]))
+    model_dir = tmp_path / "model"
+    shutil.copytree(trained, model_dir)
+    meta = json.loads((model_dir / "model.json").read_text())
+    meta["inputs"] = record_inputs(model_dir, events=str(events))
+    (model_dir / "model.json").write_text(json.dumps(meta))
+    when = dt.datetime(2022, 10, 14, 19)
+    _, has_world = ModelForecaster(trained).predict_counts(Quiet(), when)
+    _, has_file = ModelForecaster(model_dir).predict_counts(Quiet(), when)
+    assert not has_world.any() and has_file.tolist() == [True, False]
+    events.write_text(events.read_text().replace("Huge", "Small"))
+    with pytest.raises(ConfigError, match="changed since the model"):
+        ModelForecaster(model_dir).predict_counts(Quiet(), when)
