@@ -151,6 +151,9 @@ def session_args(args: argparse.Namespace, identity: str | None = None, run: str
 
     A client with no ``--connect`` (or a router with no ``--listen``) uses the default endpoint.
     """
+    SessionArgs(mode=args.mode, connect=list(args.connect), listen=list(args.listen))  # the flags' own errors first
+    if args.config is not None and not Path(args.config).is_file():
+        raise ConfigError(f"zenoh config {args.config}: no such file")
     certs = security(args)
     default = DEFAULT_ENDPOINT if certs is None else DEFAULT_TLS_ENDPOINT
     connect, listen = list(args.connect), list(args.listen)

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from bus.certs import fleet_size, make_certs, taxi_name
+from bus.keys import Keys
 from bus.router import free_tcp_port, router_main, wait_for_tcp
 from bus.session import SessionArgs
 from city.errors import ConfigError, SurgeError
@@ -151,6 +152,7 @@ def fleet_config(args) -> FleetConfig:  # noqa: ANN001
     from coordinator.cli import rollout_options
     from coordinator.evaluate import parse_policy
 
+    Keys(args.run)  # a bad run name is an error before anything starts
     check_scenario(args.scenario, args.data)
     name, options = parse_policy(args.policy)
     FleetConfig(policy=name).policy_class()
@@ -259,8 +261,8 @@ def parse_ids(text: str) -> list[int]:
 def cmd_agents(args) -> int:  # noqa: ANN001
     from bus.session import session_args
 
-    bus = session_args(args)
     ids = parse_ids(args.ids)
+    bus = session_args(args)
     for i in ids:
         bus.as_identity(taxi_name(i)).overrides()  # every agent's credentials are here, before any starts
     from agents.rollout import warm_up

@@ -1,0 +1,187 @@
+"""The secured bus: credentials, access rules from the key scheme, and hostile clients against a real TLS router.
+
+The hostile clients (``tests/hostile.py``) use only zenoh and msgpack, as an
+outsider would.  Small fleets and few minutes keep this file fast.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+
+from bus.access import access_control, grants
+from bus.certs import identity, make_certs
+from bus.keys import SCHEME, TAXI
+from bus.router import free_tcp_port, wait_for_tcp
+from city.errors import ConfigError
+from coordinator.cli import main
+from coordinator.fleet import in_process
+from coordinator.runtime import FleetConfig
+
+CLI = [sys.executable, "-m", "coordinator.cli"]
+HOSTILE = [sys.executable, str(Path(__file__).with_name("hostile.py"))]
+
+
+def test_certs_command_writes_a_ca_role_and_taxi_certificates(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    from cryptography import x509
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import NameOID
+
+    out = tmp_path / "creds"
+    assert main(["certs", "--out", str(out), "--taxis", "3", "--host", "10.0.0.7"]) == 0
+    text = capsys.readouterr().out
+    assert str(out / "ca.pem") in text and str(out / "taxi-2.pem") in text and "mode 0600" in text
+    ca = x509.load_pem_x509_certificate((out / "ca.pem").read_bytes())
+    for name in ("router", "coordinator", "predictor", "taxi-0", "taxi-1", "taxi-2"):
+        ident = identity(out, name)
+        cert = x509.load_pem_x509_certificate(ident.cert.read_bytes())
+        assert cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == name
+        ca.public_key().verify(cert.signature, cert.tbs_certificate_bytes, ec.ECDSA(cert.signature_hash_algorithm))
+        assert cert.issuer == ca.subject
+        assert ident.key.stat().st_mode & 0o777 == 0o600 and ident.cert.stat().st_mode & 0o077 != 0o077
+    router = x509.load_pem_x509_certificate((out / "router.pem").read_bytes())
+    assert "10.0.0.7" in str(router.extensions.get_extension_for_class(x509.SubjectAlternativeName).value)
+    assert (out / "ca.key").stat().st_mode & 0o777 == 0o600
+    assert json.loads((out / "fleet.json").read_text())["taxis"] == 3
+    assert main(["certs", "--out", str(out), "--taxis", "3"]) == 2
+    assert "already exists: choose an empty --out directory" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="credentials of taxi-3: .*taxi-3.pem: no such file"):
+        identity(out, "taxi-3")
+
+
+def test_every_key_has_one_writer_and_the_rules_follow_the_scheme() -> None:
+    acl = access_control(4, "r")
+    assert acl["enabled"] and acl["default_permission"] == "deny"
+    assert {r["permission"] for r in acl["rules"]} == {"allow"}
+    who = {s["id"]: s["cert_common_names"] for s in acl["subjects"]}
+    assert all(len(names) == 1 and names[0] == sid for sid, names in who.items())
+    rules = {r["id"]: r for r in acl["rules"]}
+    granted: dict[str, set] = {}
+    for pol in acl["policies"]:
+        for rid in pol["rules"]:
+            rule = rules[rid]
+            for msg in rule["messages"]:
+                for k in rule["key_exprs"]:
+                    granted.setdefault(f"{rule['flows'][0]} {msg} {k}", set()).update(pol["subjects"])
+    writes = {"put", "declare_queryable", "reply", "liveliness_token"}
+    for channel in SCHEME:
+        keys = [f"surge/r/{channel.name}/{i}" for i in range(4)] if channel.per_agent else [f"surge/r/{channel.name}"]
+        for i, k in enumerate(keys):
+            writers = {s for g, subjects in granted.items() for s in subjects
+                       if g.split()[0] == "ingress" and g.split()[1] in writes and g.split()[2] in (k, k.rsplit("/", 1)[0] + "/*")}
+            expected = {f"taxi-{i}"} if channel.writer == TAXI else {channel.writer}
+            assert writers == expected, (k, writers)
+    mine = {(flow, msgs, k) for flow, msgs, k in grants(TAXI, 3, "r")}
+    assert ("ingress", ("put",), "surge/r/control/3") in mine and ("egress", ("put",), "surge/r/turn/3") in mine
+    assert not any(k.endswith("/turn/*") and flow == "egress" for flow, _, k in mine)  # a taxi sees only its own turns
+
+
+# ------------------------------------------------------------ a real router
+@pytest.fixture(scope="module")
+def secured(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+    """A TLS router with access control for run ``acl``, credentials for 5 taxis, and a rogue CA's."""
+    d = tmp_path_factory.mktemp("secured")
+    certs, rogue = d / "certs", d / "rogue"
+    make_certs(certs, 5)
+    make_certs(rogue, 5)
+    port = free_tcp_port()
+    endpoint = f"tls/127.0.0.1:{port}"
+    proc = subprocess.Popen([*CLI, "router", "--certs", str(certs), "--listen", endpoint], stderr=subprocess.PIPE, text=True)
+    try:
+        assert "mutual TLS" in proc.stderr.readline()
+        wait_for_tcp("127.0.0.1", port, 30)
+        yield {"endpoint": endpoint, "tcp_endpoint": f"tcp/127.0.0.1:{port}", "certs": str(certs), "rogue": str(rogue), "router": proc}
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+def test_taxi_3s_certificate_can_do_only_what_taxi_3_does(secured: dict) -> None:
+    args = {k: v for k, v in secured.items() if k != "router"}
+    proc = subprocess.run([*HOSTILE, "probe", json.dumps({**args, "run": "acl"})], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout.splitlines()[-1])
+    assert out["connects"] == {"no-cert": False, "plain-tcp": False, "rogue-ca-taxi-3": False, "router-cert": False}
+    seen = [tuple(s) for s in out["seen"]]
+    # what taxi 3 may do arrives, which shows the observers were listening ...
+    assert ("coordinator", "surge/acl/control/3", "taxi-3 on its own key") in seen
+    assert ("coordinator", "surge/acl/alive/3", "token") in seen
+    assert ("taxi-0", "surge/acl/state", "the coordinator's state") in seen
+    # ... and nothing else: no control/4, committed, state, forecast, turn or stop from taxi 3, no alive/4,
+    # and no control/3 from any other identity
+    assert [s for s in seen if "forged" in s[2] or s[1].endswith("alive/4")] == []
+    assert len(seen) == 3
+    assert out["answers"] == {"taxi-0 spec": ["coordinator"], "taxi-0 snapshot": ["coordinator"],
+                              "coordinator predictor": ["predictor"], "taxi-4 spec": ["coordinator"]}
+    assert secured["router"].poll() is None
+
+
+def _lines(stream, into: list[str]) -> threading.Thread:  # noqa: ANN001
+    t = threading.Thread(target=lambda: into.extend(iter(stream.readline, "")), daemon=True)
+    t.start()
+    return t
+
+
+def test_forged_stays_and_a_fuzz_flood_change_nothing(secured: dict, tmp_path: Path, synthetic_scenario) -> None:  # noqa: ANN001
+    """Every identity but taxi 3's answers taxi 3's turns with "stay"; 10,000 fuzz messages on every key a taxi may write."""
+    pytest.importorskip("numba")
+    from agents.rollout import warm_up
+
+    warm_up(synthetic_scenario.city)
+    run, out, ep, certs = "attack", tmp_path / "result.json", secured["endpoint"], secured["certs"]
+    bus = ["--connect", ep, "--certs", certs]
+    coord = subprocess.Popen([*CLI, "coordinator", *bus, "--run", run, "--taxis", "4", "--minutes", "6", "--forecast", "true-rate",
+                              "--samples", "50", "--deadline", "60", "--minute-seconds", "1.5", "--join-timeout", "300",
+                              "--predictor", "--json", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    predictor = subprocess.Popen([*CLI, "predictor", "serve", *bus, "--run", run, "--forecast", "true-rate"],
+                                 stderr=subprocess.DEVNULL, text=True)
+    agents = subprocess.Popen([*CLI, "agents", *bus, "--run", run, "--ids", "0-3"], stderr=subprocess.PIPE, text=True)
+    procs = [coord, predictor, agents]
+    err: list[str] = []
+    reader = _lines(coord.stderr, err)
+    try:
+        deadline = time.monotonic() + 240
+        while not any("agents joined" in line for line in err):
+            assert coord.poll() is None and time.monotonic() < deadline, "".join(err)
+            time.sleep(0.2)
+        plan = {"endpoint": ep, "certs": certs, "run": run, "victim": 3, "fuzz": 10_000, "max_s": 120, "seed": 1,
+                "attackers": ["coordinator", "predictor", "taxi-0", "taxi-1", "taxi-2", "taxi-4"],
+                "fuzzers": ["taxi-0", "taxi-1", "taxi-2", "taxi-3", "taxi-4"]}
+        hostile = subprocess.Popen([*HOSTILE, "attack", json.dumps(plan)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        procs.append(hostile)
+        assert hostile.stdout.readline().strip() == "fuzzed 10000"
+        alive = {p.args[3] if p is not hostile else "hostile": p.poll() is None for p in procs}
+        assert all(alive.values()) and secured["router"].poll() is None, alive
+        report, hostile_err = hostile.communicate(timeout=180)
+        assert hostile.returncode == 0, hostile_err
+        assert coord.wait(180) == 0, "".join(err)[-3000:]
+        assert agents.wait(60) == 0
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+            p.wait(10)
+    reader.join(5)
+    attack = json.loads(report.splitlines()[-1])
+    assert attack["connects"] == {"no-cert": False, "router-cert": False}
+    assert attack["turns_seen"] == {n: 0 for n in plan["attackers"]}  # nobody else sees taxi 3's turns
+    assert min(attack["forged"].values()) > 10
+    result = json.loads(out.read_text())
+    ref = in_process(FleetConfig(taxis=4, minutes=6, options={"forecast": "true-rate", "samples": 50}))
+    assert result["fallbacks"] == 0 and result["planned_per_agent"][3] > 0
+    assert result["decisions_sha256"] == ref["decisions_sha256"] and result["total_cost"] == ref["total_cost"]
+    # every fuzz message on a control key reached the coordinator and was dropped; no forged stay got through the router
+    on_controls = sum(n for kind, n in result["rejected_messages"].items() if kind.startswith("control:"))
+    assert on_controls + result["stale_messages"] == attack["fuzz_controls"]
+    log = "".join(err)
+    assert "ignored: surge/attack/control/" in log and "not one of its controls" in log
+    assert log.count("ignored:") <= len(result["rejected_messages"])  # at most one line per kind, not one per message
+    assert os.path.getsize(out) > 0
