@@ -205,6 +205,10 @@ class Inbox:
             key, lambda s: self._q.put((tag, str(s.key_expr), s.kind == zenoh.SampleKind.PUT)), history=True
         )
 
+    def put(self, tag: str, key: str, payload: Any) -> None:
+        """Hand in an item as a callback would."""
+        self._q.put((tag, key, payload))
+
     def get(self, timeout: float | None) -> tuple[str, str, Any] | None:
         """The next item, or ``None`` after ``timeout`` seconds."""
         try:

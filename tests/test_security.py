@@ -185,3 +185,110 @@ def test_forged_stays_and_a_fuzz_flood_change_nothing(secured: dict, tmp_path: P
     assert "ignored: surge/attack/control/" in log and "not one of its controls" in log
     assert log.count("ignored:") <= len(result["rejected_messages"])  # at most one line per kind, not one per message
     assert os.path.getsize(out) > 0
+
+
+# ------------------------------------------------------ distrust on receipt
+def _agent(run: str = "u", me: int = 1):  # noqa: ANN202
+    """An agent that accepted a 3-taxi spec of the synthetic city, with no bus (messages are handed in)."""
+    from agents.rollout import RolloutConfig
+    from agents.taxi import AgentConfig, TaxiAgent
+    from bus.session import SessionArgs
+    from bus.wire import RunSpec
+    from city.scenario import load_city
+
+    agent = TaxiAgent(AgentConfig(index=me, run=run, bus=SessionArgs(mode="client", connect=["tcp/127.0.0.1:1"])))
+    spec = RunSpec(run=run, scenario="synthetic", data_dir=None, city=load_city("synthetic").summary(), taxis=3, minutes=4,
+                   policy="surge", rollout={"samples": 4, "horizon": 2}, deadline_s=5.0)
+    agent._accept_spec(spec.encode())
+    from bus.checks import Bounds
+
+    agent.bounds = Bounds(taxis=3, nodes=agent.city.n_nodes, sectors=agent.city.n_sectors, minutes=4)
+    assert agent.rollout == RolloutConfig(samples=4, horizon=2)
+    return agent, spec
+
+
+def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest.CaptureFixture) -> None:
+    import dataclasses
+
+    import numpy as np
+
+    from agents.rollout import candidate_controls
+    from bus.delta import state_message
+    from bus.session import Inbox
+    from bus.wire import Control, RunSpec, State, Stop, Turn, WireError
+    from city.sim import Observation
+
+    agent, spec = _agent()
+    k = agent.keys
+    bad_spec = dataclasses.replace(spec, rollout={"samples": 4, "teleport": True})
+    with pytest.raises(WireError, match="field 'rollout' has unknown settings 'teleport'"):
+        agent._accept_spec(bad_spec.encode())
+    with pytest.raises(WireError, match="has only 1 taxis; this is agent 1"):
+        agent._accept_spec(dataclasses.replace(spec, taxis=1).encode())
+    n = agent.city.n_nodes
+    pos = np.array([0, 5, 9], dtype=np.int32)
+    obs = Observation(t=0, pos=pos, tau=np.zeros(3, np.int32), dest=np.full(3, -1, np.int32), req_index=np.zeros(0, np.int64),
+                      req_pickup=np.zeros(0, np.int32), req_dropoff=np.zeros(0, np.int32), req_entry=np.zeros(0, np.int32))
+    good = state_message(obs, None)
+    two = dataclasses.replace(good, pos=pos[:2], tau=good.tau[:2], dest=good.dest[:2])
+    off_map = dataclasses.replace(good, pos=np.array([0, n, 9], dtype=np.int32))
+    ok = int(candidate_controls(agent.city, obs, 0)[-1])
+    inbox = Inbox()
+    for item in [
+        ("state", k.state, two.encode()),  # fewer taxis than the run: was an IndexError
+        ("state", k.state, off_map.encode()),
+        ("state", k.state, good.encode()),
+        ("committed", k.committed(0), Control(t=0, agent=0, control=2**40, by="agent").encode()),  # was an int32 overflow
+        ("committed", k.committed(0), Control(t=0, agent=0, control=-5, by="agent").encode()),  # was a wrapped index
+        ("committed", k.committed(2), Control(t=0, agent=0, control=ok, by="agent").encode()),  # another agent's key
+        ("committed", k.committed(0), Control(t=3, agent=0, control=ok, by="agent").encode()),  # not the current minute
+        ("turn", k.turn(1), Turn(t=2, agent=1).encode()),
+        ("stop", k.stop, Stop(t=1).encode()),  # not the run's end: the agent stays
+        ("forecast", k.forecast, b"\x93\x01\x02"),
+        ("committed", k.committed(0), Control(t=0, agent=0, control=ok, by="agent").encode()),
+        ("stop", k.stop, Stop(t=4).encode()),
+    ]:
+        inbox.put(*item)
+    agent._loop(None, inbox, None)
+    err = capsys.readouterr().err
+    for reason in ("field 'pos' has 2 taxis, the run has 3", f"field 'pos' holds {n}, outside 0..{n - 1}",
+                   "control 1099511627776 of agent 0 is not one of its controls",
+                   "control of agent 0 on another agent's key", "field 't' is 3, the current minute is 0",
+                   "turn/1: field 't' is 2, the current minute is 0", "field 't' is 1, the run ends after minute 4", "forecast"):
+        assert reason in err, reason
+    assert "control -5" not in err  # the same kind as 2**40's: counted, not logged again
+    assert agent.rejected.counts["committed: surge/u/committed/N: control N of agent N is not one of its controls …"] == 2
+    assert agent.view.obs is not None and agent.view.obs.t == 0
+    assert agent.committed == {0: {0: ok}}  # only the good commitment
+
+
+def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> None:
+    from bus.wire import Control
+    from coordinator.runtime import Coordinator
+
+    coord = Coordinator(FleetConfig(run="c", taxis=3, minutes=2, options={"forecast": "true-rate", "samples": 4}), progress=False)
+    coord.obs = obs = coord.sim.observe()
+    k = coord.keys
+    from agents.rollout import candidate_controls
+
+    ok = int(candidate_controls(coord.city, obs, 1)[0])
+    want = (0, 1)
+    for payload in (Control(t=0, agent=1, control=2**40).encode(), Control(t=0, agent=1, control=-5).encode(),
+                    Control(t=0, agent=1, control=ok, by="base").encode(), Control(t=0, agent=1, control=ok, plan_s=float("nan")).encode(),
+                    b"junk"):
+        assert coord._handle(("control", k.control(1), payload), want) is None
+    assert coord._handle(("control", k.control(2), Control(t=0, agent=1, control=ok).encode()), want) is None
+    assert coord._handle(("alive", k.alive(7), True), want) is None and coord.alive == set()
+
+    class Gone:
+        def reply(self, *_):  # noqa: ANN002
+            raise RuntimeError("the querier left")
+
+        def drop(self) -> None:
+            pass
+
+    assert coord._handle(("snapshot", k.snapshot, Gone()), want) is None
+    got = coord._handle(("control", k.control(1), Control(t=0, agent=1, control=ok).encode()), want)
+    assert got is not None and got.control == ok
+    kinds = coord.rejected.counts
+    assert sum(kinds.values()) == 8 and any("RuntimeError" in kind for kind in kinds)
