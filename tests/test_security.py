@@ -292,3 +292,32 @@ def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> 
     assert got is not None and got.control == ok
     kinds = coord.rejected.counts
     assert sum(kinds.values()) == 8 and any("RuntimeError" in kind for kind in kinds)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["coordinator", "--run", "x"], "the bus runs with mutual TLS and access control: pass --certs DIR"),
+        (["agents", "--ids", "0"], "pass --certs DIR (make it with `surge certs --out DIR --taxis N`), or --insecure"),
+        (["router", "--certs", "/nonexistent"], "--certs /nonexistent: no such directory"),
+        (["fleet", "--certs", "/nonexistent", "--insecure"], "--certs and --insecure: choose one"),
+        (["predictor", "serve", "--forecast", "true-rate", "--certs", "/nonexistent"], "--certs /nonexistent: no such directory"),
+    ],
+)
+def test_the_bus_is_secured_unless_asked_otherwise(args: list[str], message: str, capsys: pytest.CaptureFixture) -> None:
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+
+
+def test_insecure_says_so_in_one_line(tmp_path: Path) -> None:
+    proc = subprocess.run([*CLI, "router", "--insecure", "--print-config"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and proc.stderr.strip().splitlines() == [
+        "surge: warning: --insecure: the bus runs without TLS or access control; anyone who reaches it can steer the fleet"]
+    assert "access_control" not in json.loads(proc.stdout)
+    make_certs(tmp_path / "c", 2)
+    proc = subprocess.run([*CLI, "router", "--certs", str(tmp_path / "c"), "--run", "r1", "--print-config"],
+                          capture_output=True, text=True, timeout=60)
+    conf = json.loads(proc.stdout)
+    assert conf["listen"]["endpoints"] == ["tls/127.0.0.1:7447"] and conf["transport"]["link"]["protocols"] == ["tls"]
+    assert {k for r in conf["access_control"]["rules"] for k in r["key_exprs"]} >= {"surge/r1/control/1", "surge/r1/state"}
