@@ -8,6 +8,7 @@ import sys
 import threading
 import time
 
+from bus.certs import fleet_size
 from bus.session import SessionArgs, open_session
 from city.errors import ConfigError
 
@@ -23,8 +24,6 @@ def router_main(bus: SessionArgs, announce: bool = False) -> None:
         if announce:
             where = ", ".join(bus.listen) or f"the endpoints of {bus.config}"
             if bus.certs is not None:
-                from bus.certs import fleet_size
-
                 scope = f"run {bus.run!r}" if bus.run else "every run"
                 how = (f"mutual TLS with the CA in {bus.certs}, access control for {fleet_size(bus.certs)} taxis "
                        f"of {scope} (default deny)")

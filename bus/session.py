@@ -25,6 +25,8 @@ from typing import Any, Iterator
 
 import zenoh
 
+from bus.access import access_control
+from bus.certs import fleet_size, identity
 from city.errors import ConfigError
 
 MODES = ("peer", "client", "router")
@@ -71,8 +73,6 @@ class SessionArgs:
             out["listen/endpoints"] = list(self.listen)
         out["scouting/multicast/enabled"] = self.multicast
         if self.certs is not None:
-            from bus.certs import fleet_size, identity
-
             if self.identity is None:
                 raise ConfigError("a secured session needs an identity (router, coordinator, predictor or taxi-<i>)")
             ident = identity(self.certs, self.identity)
@@ -82,8 +82,6 @@ class SessionArgs:
             out["transport/link/protocols"] = ["tls"]
             out["transport/link/tls"] = tls
             if self.mode == "router":
-                from bus.access import access_control
-
                 out["access_control"] = access_control(fleet_size(self.certs), self.run)
         return out
 
