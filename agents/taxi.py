@@ -197,6 +197,8 @@ class TaxiAgent:
         if c.t == obs.t + 1 and len(self.early) < self.bounds.taxis:
             self.early.append((c, key))  # checked once the state of minute c.t is in
             return
+        if c.t == obs.t - 1:
+            return  # a later agent's commitment of the minute before, overtaken by this minute's state: no longer needed
         check_control(c, key, self.bounds, int(obs.t))
         if obs.tau[c.agent] > 0:
             raise WireError(f"{key}: agent {c.agent} is busy at minute {obs.t}; it commits no control")
