@@ -117,7 +117,8 @@ class TaxiAgent:
                           f"(last: {why})")
 
     def _accept_spec(self, payload: bytes) -> RunSpec:
-        spec = check_spec(decode(payload, RunSpec, self.keys.spec), self.keys.spec, lambda: dataclasses.fields(RolloutConfig))  # type: ignore[arg-type]
+        settings = [f.name for f in dataclasses.fields(RolloutConfig)]
+        spec = check_spec(decode(payload, RunSpec, self.keys.spec), self.keys.spec, settings)  # type: ignore[arg-type]
         if spec.run != self.cfg.run:
             raise WireError(f"{self.keys.spec}: the spec of run {spec.run!r}, this agent joins {self.cfg.run!r}")
         if spec.taxis <= self.me:

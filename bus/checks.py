@@ -12,11 +12,10 @@ hold even for a sender that may.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import re
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -128,10 +127,10 @@ def check_stop(msg: Stop, key: str, b: Bounds) -> Stop:
     return msg
 
 
-def check_spec(spec: RunSpec, key: str, rollout_fields: Callable[[], list[dataclasses.Field]]) -> RunSpec:
-    """A run spec whose planner settings are the planner's own fields, with a fleet and an episode."""
-    known = {f.name for f in rollout_fields()}
-    unknown = sorted(set(spec.rollout) - known)
+def check_spec(spec: RunSpec, key: str, settings: Iterable[str]) -> RunSpec:
+    """A run spec whose planner settings are among the planner's own ``settings``, with a fleet and an episode."""
+    known = set(settings)
+    unknown = sorted(map(str, set(spec.rollout) - known))
     if unknown:
         raise WireError(f"{key}: field 'rollout' has unknown settings {', '.join(map(repr, unknown))}; known: {', '.join(sorted(known))}")
     if spec.taxis < 1 or spec.minutes < 1:
