@@ -215,7 +215,7 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
     from agents.rollout import candidate_controls
     from bus.delta import state_message
     from bus.session import Inbox
-    from bus.wire import Control, RunSpec, State, Stop, Turn, WireError
+    from bus.wire import Control, Stop, Turn, WireError
     from city.sim import Observation
 
     agent, spec = _agent()
