@@ -7,11 +7,18 @@ controls of the agents before it fill in its predecessors' moves, and a
 :class:`~bus.wire.Turn` makes it run :func:`agents.rollout.plan_agent`,
 exactly the function the in-process policy calls, and publish the result.
 
+Nothing received is used before it is checked against what the agent knows
+(:mod:`bus.checks`): the fleet's size, the city's nodes, the current minute,
+a predecessor's candidate controls.  A message that fails, or whose handling
+raises anything at all, is dropped, and the first of each kind is logged; no
+message ends the agent but the run's own stop.
+
 This module must not import torch: forecasts arrive on the bus.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import resource
 import sys
 import time
@@ -20,7 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.forecast import Forecast
-from agents.rollout import DemandTables, RolloutConfig, StepContext, plan_agent, prepare_step, warm_up
+from agents.rollout import DemandTables, RolloutConfig, StepContext, candidate_controls, plan_agent, prepare_step, warm_up
+from bus.checks import (Bounds, Rejections, check_choice, check_control, check_forecast, check_spec, check_state,
+                        check_stop, check_turn)
 from bus.delta import StateView
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
@@ -55,8 +64,11 @@ class TaxiAgent:
         self.tables: dict[int, DemandTables] = {}
         self.committed: dict[int, dict[int, int]] = {}
         self.pending: Turn | None = None
+        self.early: list[tuple[Control, str]] = []
         self.context: StepContext | None = None
         self.decisions = 0
+        self.rejected = Rejections(lambda m: log(self.me, m))
+        self._cities: dict[tuple[str, str | None], object] = {}
 
     def run(self) -> int:
         """Join the run and plan until it stops; the number of controls this agent planned."""
@@ -70,14 +82,7 @@ class TaxiAgent:
                 inbox.subscribe(session, self.keys.stop, "stop"),
             ]
             spec = self._fetch_spec(session)
-            from city.scenario import load_city
-
-            self.city = load_city(spec.scenario, self.cfg.data_dir or spec.data_dir)
-            if self.city.summary() != spec.city:
-                raise ConfigError(f"agent {self.me}: this host's {spec.scenario} city {self.city.summary()} is not the coordinator's {spec.city}")
-            if spec.taxis <= self.me:
-                raise ConfigError(f"agent {self.me}: run {spec.run!r} has only {spec.taxis} taxis")
-            self.rollout = RolloutConfig(**spec.rollout)
+            self.bounds = Bounds(taxis=spec.taxis, nodes=self.city.n_nodes, sectors=self.city.n_sectors, minutes=spec.minutes)
             self._warm_up()
             out = publisher(session, self.keys.control(self.me))
             token = session.liveliness().declare_token(self.keys.alive(self.me))
@@ -95,27 +100,111 @@ class TaxiAgent:
         warm_up(self.city, self.rollout)
 
     def _fetch_spec(self, session) -> RunSpec:  # noqa: ANN001
+        """The first acceptable answer on ``spec``; the city is built from it.  A bad answer is dropped and the agent asks again."""
         deadline = time.monotonic() + self.cfg.join_timeout_s
+        why = "no answer"
         while time.monotonic() < deadline:
             for reply in session.get(self.keys.spec, timeout=2.0):
-                if reply.ok is not None:
-                    return decode(reply.ok.payload.to_bytes(), RunSpec, self.keys.spec)  # type: ignore[return-value]
+                if reply.ok is None:
+                    continue
+                try:
+                    return self._accept_spec(reply.ok.payload.to_bytes())
+                except Exception as exc:  # a spec this agent cannot run: drop it, ask again
+                    why = str(exc)
+                    self.rejected.exception("spec", self.keys.spec, exc)
             time.sleep(0.2)
-        raise ConfigError(f"agent {self.me}: no coordinator answered on {self.keys.spec} within {self.cfg.join_timeout_s:.0f} s")
+        raise ConfigError(f"agent {self.me}: no acceptable run spec on {self.keys.spec} within {self.cfg.join_timeout_s:.0f} s "
+                          f"(last: {why})")
+
+    def _accept_spec(self, payload: bytes) -> RunSpec:
+        settings = [f.name for f in dataclasses.fields(RolloutConfig)]
+        spec = check_spec(decode(payload, RunSpec, self.keys.spec), self.keys.spec, settings)  # type: ignore[arg-type]
+        if spec.run != self.cfg.run:
+            raise WireError(f"{self.keys.spec}: the spec of run {spec.run!r}, this agent joins {self.cfg.run!r}")
+        if spec.taxis <= self.me:
+            raise WireError(f"{self.keys.spec}: run {spec.run!r} has only {spec.taxis} taxis; this is agent {self.me}")
+        rollout = RolloutConfig(**spec.rollout)
+        where = (spec.scenario, self.cfg.data_dir or spec.data_dir)
+        if where not in self._cities:  # build each named city once, even if it fails
+            from city.scenario import load_city
+
+            try:
+                self._cities[where] = load_city(*where)
+            except Exception as exc:
+                self._cities[where] = exc
+        city = self._cities[where]
+        if isinstance(city, Exception):
+            raise city
+        if city.summary() != spec.city:
+            raise WireError(f"{self.keys.spec}: this host's {spec.scenario} city {city.summary()} is not the coordinator's {spec.city}")
+        self.city, self.rollout = city, rollout
+        return spec
 
     def _snapshot(self, session) -> None:  # noqa: ANN001
         for reply in session.get(self.keys.snapshot, timeout=5.0):
             if reply.ok is None:
                 continue
-            snap = decode(reply.ok.payload.to_bytes(), Snapshot, self.keys.snapshot)
-            self._on_forecast(decode(snap.forecast, ForecastMsg, self.keys.snapshot))  # type: ignore[arg-type]
-            self.view.apply(decode(snap.state, State, self.keys.snapshot))  # type: ignore[arg-type]
+            try:
+                snap = decode(reply.ok.payload.to_bytes(), Snapshot, self.keys.snapshot)
+                state = check_state(decode(snap.state, State, self.keys.snapshot), self.keys.snapshot, self.bounds)  # type: ignore[arg-type]
+                if not state.full:
+                    raise WireError(f"{self.keys.snapshot}: a snapshot's state must be full")
+                self._on_forecast(decode(snap.forecast, ForecastMsg, self.keys.snapshot))  # type: ignore[arg-type]
+            except Exception as exc:  # a bad snapshot: drop it, try the next answer
+                self.rejected.exception("snapshot", self.keys.snapshot, exc)
+                continue
+            self.view.apply(state)
             self.context = None
             return
 
     def _on_forecast(self, msg: ForecastMsg) -> None:
+        check_forecast(msg, self.keys.forecast, self.bounds)
         fc = Forecast(eta=msg.eta, rho=msg.rho, delta=msg.delta, beta=msg.beta)
         self.tables[msg.hour] = DemandTables.build(self.city, fc, self.rollout.ce, self.rollout.seed)
+
+    def _minute(self) -> int | None:
+        return None if self.view.obs is None else int(self.view.obs.t)
+
+    def handle(self, session, tag: str, key: str, payload: bytes) -> bool:  # noqa: ANN001
+        """Check and apply one message; ``False`` when it is the run's stop."""
+        if tag == "stop":
+            check_stop(decode(payload, Stop, key), key, self.bounds)  # type: ignore[arg-type]
+            return False
+        if tag == "state":
+            msg = check_state(decode(payload, State, key), key, self.bounds)  # type: ignore[arg-type]
+            if not self.view.apply(msg):
+                self._snapshot(session)
+            self.context = None
+            early, self.early = self.early, []
+            for c, k in early:  # commitments that came ahead of their minute's state
+                try:
+                    self._on_committed(c, k)
+                except Exception as exc:
+                    self.rejected.exception("committed", k, exc)
+        elif tag == "forecast":
+            self._on_forecast(decode(payload, ForecastMsg, key))  # type: ignore[arg-type]
+            self.context = None
+        elif tag == "committed":
+            self._on_committed(decode(payload, Control, key), key)  # type: ignore[arg-type]
+        elif tag == "turn":
+            self.pending = check_turn(decode(payload, Turn, key), key, self.me, self.bounds, self._minute())  # type: ignore[arg-type]
+        return True
+
+    def _on_committed(self, c: Control, key: str) -> None:
+        """A predecessor's committed control of the current minute, and one of that predecessor's controls."""
+        obs = self.view.obs
+        if obs is None:
+            raise WireError(f"{key}: a committed control before this agent has a state")
+        if c.t == obs.t + 1 and len(self.early) < self.bounds.taxis:
+            self.early.append((c, key))  # checked once the state of minute c.t is in
+            return
+        if c.t == obs.t - 1:
+            return  # a later agent's commitment of the minute before, overtaken by this minute's state: no longer needed
+        check_control(c, key, self.bounds, int(obs.t))
+        if obs.tau[c.agent] > 0:
+            raise WireError(f"{key}: agent {c.agent} is busy at minute {obs.t}; it commits no control")
+        check_choice(c, key, candidate_controls(self.city, obs, c.agent))
+        self.committed.setdefault(c.t, {})[c.agent] = c.control
 
     def _loop(self, session, inbox: Inbox, out) -> None:  # noqa: ANN001
         while True:
@@ -124,29 +213,12 @@ class TaxiAgent:
                 continue
             tag, key, payload = item
             try:
-                if tag == "stop":
-                    decode(payload, Stop, key)
+                if not self.handle(session, tag, key, payload):
                     return
-                if tag == "state":
-                    msg = decode(payload, State, key)
-                    if not self.view.apply(msg):  # type: ignore[arg-type]
-                        self._snapshot(session)
-                    self.context = None
-                elif tag == "forecast":
-                    self._on_forecast(decode(payload, ForecastMsg, key))  # type: ignore[arg-type]
-                    self.context = None
-                elif tag == "committed":
-                    c = decode(payload, Control, key)
-                    self.committed.setdefault(c.t, {})[c.agent] = c.control  # type: ignore[attr-defined]
-                elif tag == "turn":
-                    turn = decode(payload, Turn, key)
-                    if turn.agent == self.me:  # type: ignore[attr-defined]
-                        self.pending = turn  # type: ignore[assignment]
-            except WireError as exc:
-                log(self.me, f"ignored: {exc}")
-                continue
-            self._prepare()
-            self._maybe_plan(out)
+                self._prepare()
+                self._maybe_plan(out)
+            except Exception as exc:  # one bad message never ends the agent: drop it and go on
+                self.rejected.exception(tag, key, exc)
 
     def _prepare(self) -> None:
         """Build the minute's shared context as soon as the state and forecast are in, while earlier agents plan."""

@@ -1,5 +1,10 @@
 """The key-expression scheme of one run: everything lives under ``surge/<run>/``.
 
+:data:`SCHEME` is the one table of the run's keys: what each carries, which
+role writes it and which roles read it.  :class:`Keys` builds key
+expressions only from it, and :mod:`bus.access` writes the router's
+access-control rules from it, so a key and its rule cannot drift apart.
+
 =========================  ==========================  ==============================
 key                        who writes                  what
 =========================  ==========================  ==============================
@@ -19,42 +24,94 @@ key                        who writes                  what
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 
 from city.errors import ConfigError
 
 PREFIX = "surge"
 _RUN = re.compile(r"^[A-Za-z0-9_.-]+$")
 
+#: Roles on the bus; a taxi's identity is ``taxi-<i>`` (see :mod:`bus.certs`).
+COORDINATOR, PREDICTOR, TAXI = "coordinator", "predictor", "taxi"
+#: How a key is used: published samples, a queryable that answers queries, or liveliness tokens.
+PUB, QUERYABLE, TOKEN = "pub", "queryable", "token"
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One key of the scheme.
+
+    ``per_agent`` keys end in an agent index.  A taxi writes only its own
+    per-agent keys; with ``own_only`` it also reads only its own.
+    """
+
+    name: str
+    per_agent: bool
+    use: str
+    writer: str
+    readers: tuple[str, ...]
+    own_only: bool = False
+
+
+SCHEME: tuple[Channel, ...] = (
+    Channel("spec", False, QUERYABLE, COORDINATOR, (TAXI,)),
+    Channel("snapshot", False, QUERYABLE, COORDINATOR, (TAXI,)),
+    Channel("state", False, PUB, COORDINATOR, (TAXI,)),
+    Channel("forecast", False, PUB, COORDINATOR, (TAXI,)),
+    Channel("turn", True, PUB, COORDINATOR, (TAXI,), own_only=True),
+    Channel("control", True, PUB, TAXI, (COORDINATOR,)),
+    Channel("committed", True, PUB, COORDINATOR, (TAXI,)),
+    Channel("alive", True, TOKEN, TAXI, (COORDINATOR,)),
+    Channel("predictor", False, QUERYABLE, PREDICTOR, (COORDINATOR,)),
+    Channel("stop", False, PUB, COORDINATOR, (TAXI,)),
+)
+CHANNELS = {c.name: c for c in SCHEME}
+
+
+def root(run: str | None) -> str:
+    """``surge/<run>``; ``None`` stands for every run (``surge/*``, for access rules)."""
+    if run is None:
+        return f"{PREFIX}/*"
+    if not _RUN.match(run):
+        raise ConfigError(f"run name {run!r}: use letters, digits, '_', '.' or '-'")
+    return f"{PREFIX}/{run}"
+
+
+def key(run_root: str, name: str, agent: int | str | None = None) -> str:
+    """The key of channel ``name`` (for agent ``agent``, an index or ``*``, on a per-agent channel)."""
+    channel = CHANNELS[name]
+    if channel.per_agent != (agent is not None):
+        raise ValueError(f"channel {name!r} {'needs' if channel.per_agent else 'takes no'} agent index")
+    return f"{run_root}/{name}" if agent is None else f"{run_root}/{name}/{agent}"
+
 
 class Keys:
-    """Key expressions of run ``run``."""
+    """Key expressions of run ``run``, built from :data:`SCHEME`."""
 
     def __init__(self, run: str) -> None:
-        if not _RUN.match(run):
-            raise ConfigError(f"run name {run!r}: use letters, digits, '_', '.' or '-'")
         self.run = run
-        self.root = f"{PREFIX}/{run}"
-        self.spec = f"{self.root}/spec"
-        self.snapshot = f"{self.root}/snapshot"
-        self.state = f"{self.root}/state"
-        self.forecast = f"{self.root}/forecast"
-        self.stop = f"{self.root}/stop"
-        self.predictor = f"{self.root}/predictor"
-        self.all_controls = f"{self.root}/control/*"
-        self.all_committed = f"{self.root}/committed/*"
-        self.all_alive = f"{self.root}/alive/*"
+        self.root = root(run)
+        self.spec = key(self.root, "spec")
+        self.snapshot = key(self.root, "snapshot")
+        self.state = key(self.root, "state")
+        self.forecast = key(self.root, "forecast")
+        self.stop = key(self.root, "stop")
+        self.predictor = key(self.root, "predictor")
+        self.all_controls = key(self.root, "control", "*")
+        self.all_committed = key(self.root, "committed", "*")
+        self.all_alive = key(self.root, "alive", "*")
 
     def turn(self, agent: int) -> str:
-        return f"{self.root}/turn/{agent}"
+        return key(self.root, "turn", agent)
 
     def control(self, agent: int) -> str:
-        return f"{self.root}/control/{agent}"
+        return key(self.root, "control", agent)
 
     def committed(self, agent: int) -> str:
-        return f"{self.root}/committed/{agent}"
+        return key(self.root, "committed", agent)
 
     def alive(self, agent: int) -> str:
-        return f"{self.root}/alive/{agent}"
+        return key(self.root, "alive", agent)
 
     @staticmethod
     def agent_of(key: str) -> int | None:

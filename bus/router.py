@@ -8,6 +8,7 @@ import sys
 import threading
 import time
 
+from bus.certs import fleet_size
 from bus.session import SessionArgs, open_session
 from city.errors import ConfigError
 
@@ -22,7 +23,13 @@ def router_main(bus: SessionArgs, announce: bool = False) -> None:
     with open_session(bus):
         if announce:
             where = ", ".join(bus.listen) or f"the endpoints of {bus.config}"
-            print(f"zenoh router listening on {where}; Ctrl-C stops it", file=sys.stderr, flush=True)
+            if bus.certs is not None:
+                scope = f"run {bus.run!r}" if bus.run else "every run"
+                how = (f"mutual TLS with the CA in {bus.certs}, access control for {fleet_size(bus.certs)} taxis "
+                       f"of {scope} (default deny)")
+            else:
+                how = "INSECURE: no TLS, no access control"
+            print(f"zenoh router listening on {where}; {how}; Ctrl-C stops it", file=sys.stderr, flush=True)
         stop.wait()
 
 

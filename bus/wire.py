@@ -12,6 +12,7 @@ in one line and go on.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -62,7 +63,8 @@ def _array(code: str, raw: Any, where: str) -> np.ndarray:
     if not isinstance(raw, dict) or not isinstance(raw.get("data"), bytes) or not isinstance(raw.get("shape"), list):
         raise WireError(f"{where}: expected {{shape, data}} of float64")
     shape = raw["shape"]
-    if not all(isinstance(n, int) and n >= 0 for n in shape) or int(np.prod(shape)) * 8 != len(raw["data"]):
+    if (len(shape) > 4 or not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in shape)
+            or math.prod(shape) * 8 != len(raw["data"])):
         raise WireError(f"{where}: shape {shape} does not match {len(raw['data'])} bytes of float64")
     return np.frombuffer(raw["data"], dtype="<f8").reshape(shape).astype(np.float64)
 
@@ -71,6 +73,17 @@ def _array(code: str, raw: Any, where: str) -> np.ndarray:
 _PLAIN: dict[str, type | tuple[type, ...]] = {
     "int": int, "str": str, "bool": bool, "float": (int, float), "dict": dict, "bytes": bytes, "str | None": (str, type(None)),
 }
+
+
+def _short(value: Any) -> str:
+    """A received value as an error message shows it: short, whatever the sender put there."""
+    if isinstance(value, bytes):
+        return f"{len(value)} bytes"
+    if isinstance(value, str):
+        return repr(value if len(value) <= 30 else value[:27] + "...")
+    if value is None or isinstance(value, (bool, int, float)):
+        return repr(value)
+    return f"a {type(value).__name__}"
 
 
 def decode(payload: bytes, expect: type[Message] | tuple[type[Message], ...], key: str = "") -> Message:
@@ -84,11 +97,15 @@ def decode(payload: bytes, expect: type[Message] | tuple[type[Message], ...], ke
     if not isinstance(raw, dict):
         raise WireError(f"{where}: expected a map, got {type(raw).__name__}")
     if raw.get("v") != WIRE_VERSION:
-        raise WireError(f"{where}: wire version {raw.get('v')!r}, expected {WIRE_VERSION}")
+        raise WireError(f"{where}: wire version {_short(raw.get('v'))}, expected {WIRE_VERSION}")
     by_kind = {cls.kind: cls for cls in expect}
     cls = by_kind.get(raw.get("kind"))  # type: ignore[arg-type]
     if cls is None:
-        raise WireError(f"{where}: kind {raw.get('kind')!r}, expected {' or '.join(by_kind)}")
+        raise WireError(f"{where}: kind {_short(raw.get('kind'))}, expected {' or '.join(by_kind)}")
+    names = {f.name for f in dataclasses.fields(cls)}
+    extra = sorted(map(str, set(raw) - names - {"v", "kind"}))
+    if extra:
+        raise WireError(f"{where}: {cls.kind} has no field {_short(extra[0])}")
     values = {}
     for f in dataclasses.fields(cls):
         if f.name not in raw:
@@ -157,7 +174,7 @@ class ForecastRequest(Message):
         try:
             dt.datetime.fromisoformat(self.when)
         except ValueError:
-            raise ValueError(f"field 'when': {self.when!r} is not an ISO date and time") from None
+            raise ValueError(f"field 'when': {_short(self.when)} is not an ISO date and time") from None
 
 
 @dataclass(frozen=True)

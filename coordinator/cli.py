@@ -217,6 +217,7 @@ def add_demo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--taxis", type=positive, default=10, help="taxis, one agent process each")
     p.add_argument("--minutes", type=positive, default=30)
     p.add_argument("--json", default=None, help="write the run's result here")
+    p.add_argument("--insecure", action="store_true", help="run the bus without TLS or access control")
     p.set_defaults(func=cmd_demo)
 
 
@@ -227,6 +228,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         run="demo", scenario="synthetic", data=None, date="2022-11-17", hour=19, minutes=args.minutes, taxis=args.taxis,
         seed=0, world_seed=0, policy="surge", forecast="true-rate", model=None, horizon=None, samples=None,
         deadline=30.0, join_timeout=120.0, minute_seconds=0.0, predictor=False, json=args.json, check=True,
+        certs=None, insecure=args.insecure,
     )
     return cmd_fleet(ns)
 

@@ -2,8 +2,11 @@
 
 Every process is started with the ``spawn`` context of ``multiprocess`` (the
 stdlib API, pickling with dill) and opens its own zenoh session; this
-launcher opens none.  With ``check``, the same instance also runs in-process
-and the two runs' decisions are compared.
+launcher opens none.  The bus is secured unless asked otherwise: the
+launcher makes the run's credentials in the run's directory, and every
+process joins over mutual TLS with its own certificate, under the router's
+access control.  With ``check``, the same instance also runs in-process and
+the two runs' decisions are compared.
 """
 
 from __future__ import annotations
@@ -17,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bus.certs import fleet_size, make_certs, taxi_name
+from bus.keys import Keys
 from bus.router import free_tcp_port, router_main, wait_for_tcp
 from bus.session import SessionArgs
 from city.errors import ConfigError, SurgeError
@@ -52,47 +57,63 @@ def in_process(cfg: FleetConfig) -> dict:
             "step_seconds": {"median": float(np.median(res.plan_seconds)), "max": float(np.max(res.plan_seconds))}}
 
 
-def run_local_fleet(cfg: FleetConfig, *, startup_timeout_s: float = 60.0) -> dict:
-    """Run ``cfg`` as real processes over a loopback router; the coordinator's result."""
+def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None = None, startup_timeout_s: float = 60.0) -> dict:
+    """Run ``cfg`` as real processes over a loopback router; the coordinator's result.
+
+    ``secure`` runs the bus with mutual TLS and access control, with the
+    credentials in ``certs`` or, by default, new ones made in the run's
+    temporary directory.
+    """
     from agents.rollout import warm_up
 
     warm_up()  # compile once here, not in every agent at once
+    with tempfile.TemporaryDirectory(prefix="surge-fleet-") as tmp:
+        if secure and certs is None:
+            certs = str(Path(tmp) / "certs")
+            make_certs(certs, cfg.taxis)
+        elif secure and fleet_size(certs) < cfg.taxis:
+            raise ConfigError(f"--certs {certs}: credentials for {fleet_size(certs)} taxis, the run has {cfg.taxis}")
+        return _launch(cfg, certs if secure else None, str(Path(tmp) / "result.json"), startup_timeout_s)
+
+
+def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeout_s: float) -> dict:
     ctx = mp.get_context("spawn")
     port = free_tcp_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    client = SessionArgs(mode="client", connect=[endpoint])
+    endpoint = f"{'tcp' if certs is None else 'tls'}/127.0.0.1:{port}"
+    client = SessionArgs(mode="client", connect=[endpoint], certs=certs)
     procs: list = []
-    router = ctx.Process(target=router_main, args=(SessionArgs(mode="router", listen=[endpoint]),), name="surge-router")
+    router_args = SessionArgs(mode="router", listen=[endpoint], certs=certs, identity="router", run=cfg.run)
+    router = ctx.Process(target=router_main, args=(router_args,), name="surge-router")
     router.start()
     procs.append(router)
     try:
         wait_for_tcp("127.0.0.1", port, startup_timeout_s)
-        with tempfile.TemporaryDirectory(prefix="surge-fleet-") as tmp:
-            result_path = str(Path(tmp) / "result.json")
-            if cfg.predictor:
-                from predictor.serve import ServeConfig, serve_main
+        if cfg.predictor:
+            from predictor.serve import ServeConfig, serve_main
 
-                serve = ServeConfig(run=cfg.run, scenario=cfg.scenario, data_dir=cfg.data_dir, world_seed=cfg.world_seed,
-                                    forecast=cfg.forecast_name(), model=cfg.options.get("model"))
-                procs.append(ctx.Process(target=serve_main, args=(serve, client), name="surge-predictor"))
-                procs[-1].start()
-            coord = ctx.Process(target=_coordinator_entry, args=(cfg, client, result_path), name="surge-coordinator")
-            coord.start()
-            procs.append(coord)
-            agents = [ctx.Process(target=_agent_entry, args=(i, cfg.run, client, cfg.join_timeout_s), name=f"surge-agent-{i}")
-                      for i in range(cfg.taxis)]
-            for p in agents:
-                p.start()
-            procs.extend(agents)
-            coord.join()
-            if coord.exitcode != 0:
-                raise ConfigError(f"the coordinator failed (exit code {coord.exitcode}); see its message above")
-            result = json.loads(Path(result_path).read_text())
-            deadline = time.monotonic() + 30
-            for p in agents:
-                p.join(max(0.1, deadline - time.monotonic()))
-            result["agents_exit_codes"] = [p.exitcode for p in agents]
-            return result
+            serve = ServeConfig(run=cfg.run, scenario=cfg.scenario, data_dir=cfg.data_dir, world_seed=cfg.world_seed,
+                                forecast=cfg.forecast_name(), model=cfg.options.get("model"))
+            procs.append(ctx.Process(target=serve_main, args=(serve, client.as_identity("predictor")), name="surge-predictor"))
+            procs[-1].start()
+        coord = ctx.Process(target=_coordinator_entry, args=(cfg, client.as_identity("coordinator"), result_path),
+                            name="surge-coordinator")
+        coord.start()
+        procs.append(coord)
+        agents = [ctx.Process(target=_agent_entry, args=(i, cfg.run, client.as_identity(taxi_name(i)), cfg.join_timeout_s),
+                              name=f"surge-agent-{i}") for i in range(cfg.taxis)]
+        for p in agents:
+            p.start()
+        procs.extend(agents)
+        coord.join()
+        if coord.exitcode != 0:
+            raise ConfigError(f"the coordinator failed (exit code {coord.exitcode}); see its message above")
+        result = json.loads(Path(result_path).read_text())
+        deadline = time.monotonic() + 30
+        for p in agents:
+            p.join(max(0.1, deadline - time.monotonic()))
+        result["agents_exit_codes"] = [p.exitcode for p in agents]
+        result["secured"] = certs is not None
+        return result
     finally:
         for p in procs:
             if p.is_alive():
@@ -129,6 +150,7 @@ def fleet_config(args) -> FleetConfig:  # noqa: ANN001
     from agents.base import parse_policy
     from city.scenario import check_scenario
 
+    Keys(args.run)  # a bad run name is an error before anything starts
     check_scenario(args.scenario, args.data)
     name, options = parse_policy(args.policy)
     FleetConfig(policy=name).policy_class()
@@ -144,6 +166,9 @@ def fleet_config(args) -> FleetConfig:  # noqa: ANN001
 def _print_result(result: dict, path: str | None) -> None:
     print(f"run {result['run']!r}: {result['policy']}, {result['taxis']} taxis, {result['minutes']} min: total cost "
           f"{result['total_cost']}, served {result['served']} of {result['requests']}, {result['fallbacks']} base-control fallbacks")
+    if "secured" in result:
+        print("  bus: " + ("mutual TLS, access control at the router (default deny, one writer per key)" if result["secured"]
+                           else "INSECURE (no TLS, no access control)"))
     plan = result["agent_plan_seconds"]["median"]
     print(f"  minute wall time median {result['step_seconds']['median']:.3f} s, max {result['step_seconds']['max']:.3f} s; "
           f"agent plan median {plan if plan is None else f'{plan:.3f} s'}; agent peak RSS {result['agent_peak_rss_mb']:.0f} MB")
@@ -154,10 +179,20 @@ def _print_result(result: dict, path: str | None) -> None:
 
 
 def cmd_fleet(args) -> int:  # noqa: ANN001
+    from bus.session import warn_insecure
+
     cfg = fleet_config(args)
+    if args.certs is not None and args.insecure:
+        raise ConfigError("--certs and --insecure: choose one")
     roles = "a router, a predictor service, a coordinator" if cfg.predictor else "a router, a coordinator"
-    print(f"starting {roles} and {cfg.taxis} agent processes on loopback", file=sys.stderr, flush=True)
-    result = run_local_fleet(cfg)
+    if args.insecure:
+        warn_insecure()
+        how = "without TLS or access control"
+    else:
+        how = (f"secured: mutual TLS and access control, with the credentials in {args.certs}" if args.certs else
+               "secured: mutual TLS and access control, with credentials made for this run")
+    print(f"starting {roles} and {cfg.taxis} agent processes on loopback, {how}", file=sys.stderr, flush=True)
+    result = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs)
     if args.check:
         print("running the same instance in-process to compare decisions", file=sys.stderr, flush=True)
         ref = in_process(cfg)
@@ -175,15 +210,31 @@ def cmd_fleet(args) -> int:  # noqa: ANN001
 def cmd_router(args) -> int:  # noqa: ANN001
     from bus.session import session_args
 
-    router_main(session_args(args), announce=True)
+    bus = session_args(args, identity="router", run=args.run)
+    if args.print_config:
+        print(json.dumps(_nested(bus.overrides()), indent=1))
+        return 0
+    router_main(bus, announce=True)
     return 0
+
+
+def _nested(overrides: dict) -> dict:
+    """``{"a/b": v}`` -> ``{"a": {"b": v}}``: a zenoh config file of the given entries."""
+    out: dict = {}
+    for path, value in overrides.items():
+        *parents, last = path.split("/")
+        node = out
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[last] = value
+    return out
 
 
 def cmd_coordinator(args) -> int:  # noqa: ANN001
     from bus.session import session_args
     from coordinator.runtime import coordinator_main
 
-    result = coordinator_main(fleet_config(args), session_args(args))
+    result = coordinator_main(fleet_config(args), session_args(args, identity="coordinator"))
     _print_result(result, args.json)
     return 0
 
@@ -208,14 +259,16 @@ def parse_ids(text: str) -> list[int]:
 def cmd_agents(args) -> int:  # noqa: ANN001
     from bus.session import session_args
 
-    bus = session_args(args)
     ids = parse_ids(args.ids)
+    bus = session_args(args)
+    for i in ids:
+        bus.as_identity(taxi_name(i)).overrides()  # every agent's credentials are here, before any starts
     from agents.rollout import warm_up
 
     warm_up()  # compile once here, not in every agent at once
     ctx = mp.get_context("spawn")
-    procs = [ctx.Process(target=_agent_entry, args=(i, args.run, bus, args.join_timeout, args.data), name=f"surge-agent-{i}")
-             for i in ids]
+    procs = [ctx.Process(target=_agent_entry, args=(i, args.run, bus.as_identity(taxi_name(i)), args.join_timeout, args.data),
+                         name=f"surge-agent-{i}") for i in ids]
     print(f"starting {len(procs)} agent processes for run {args.run!r}", file=sys.stderr, flush=True)
     for p in procs:
         p.start()
@@ -233,16 +286,47 @@ def cmd_agents(args) -> int:  # noqa: ANN001
     return 0
 
 
+def cmd_certs(args) -> int:  # noqa: ANN001
+    from bus.certs import ROLES
+
+    written = make_certs(args.out, args.taxis, args.host or None, args.days)
+    out = Path(args.out)
+    print(f"wrote the credentials of a {args.taxis}-taxi fleet to {out}/ (keys mode 0600):")
+    print(f"  certificate authority  {out / 'ca.pem'}  (its key {out / 'ca.key'}: keep it off the fleet hosts)")
+    for name in ROLES:
+        print(f"  {name:<22} {out / (name + '.pem')}, {out / (name + '.key')}")
+    last = taxi_name(args.taxis - 1)
+    print(f"  taxis                  {out / 'taxi-0.pem'} … {out / (last + '.pem')}, each with its .key (common names taxi-<i>)")
+    print(f"  manifest               {out / 'fleet.json'}  (the router reads the fleet size from it)")
+    hosts = ", ".join(args.host or ["127.0.0.1", "localhost"])
+    print(f"{len(written)} files. Clients must reach the router as one of: {hosts}. Every host needs ca.pem, its own "
+          f"certificate and key; the router also fleet.json. Run with --certs {out}.")
+    return 0
+
+
 def add_parsers(sub) -> None:  # noqa: ANN001
-    from bus.session import add_session_args
+    from bus.session import add_security_args, add_session_args
+    from coordinator.cli import _positive
 
     p = sub.add_parser("fleet", help="the local multi-process fleet: router, coordinator and one process per taxi on loopback")
     _fleet_args(p, taxis=8, minutes=20, samples=None)
     p.add_argument("--check", action="store_true", help="also run the instance in-process and compare the decisions")
+    add_security_args(p)
     p.set_defaults(func=cmd_fleet)
+
+    k = sub.add_parser("certs", help="make a fleet's credentials: a CA, router, coordinator, predictor and one certificate per taxi")
+    k.add_argument("--out", required=True, help="directory to write them to (created; must not hold credentials already)")
+    k.add_argument("--taxis", type=_positive, required=True, help="taxis, one certificate each (common names taxi-0 …)")
+    k.add_argument("--host", action="append", default=[], metavar="NAME",
+                   help="a name or address clients reach the router by (repeatable; default 127.0.0.1 and localhost)")
+    k.add_argument("--days", type=_positive, default=365, help="days the certificates are valid (default 365)")
+    k.set_defaults(func=cmd_certs)
 
     r = sub.add_parser("router", help="a zenoh router for runs across machines")
     add_session_args(r, mode="router")
+    r.add_argument("--run", default=None, help="scope the access rules to this run's keys (default: every run)")
+    r.add_argument("--print-config", action="store_true",
+                   help="print the router's generated zenoh config (TLS and access control) as JSON and exit, e.g. for zenohd")
     r.set_defaults(func=cmd_router)
 
     c = sub.add_parser("coordinator", help="the clock and world of a distributed run; agents join it over zenoh")

@@ -9,6 +9,12 @@ assumes for the agents after the decider, and the run goes on.  A restarted
 agent rejoins from a snapshot.  With every agent answering, the decisions are
 those of the in-process policy of the same seed, bit for bit
 (``tests/test_runtime.py``).
+
+A proposed control counts only if it is on its own agent's key, for the
+current minute, and one of that agent's candidate controls; anything else is
+dropped (the first of each kind logged) and the coordinator keeps waiting
+for a good one until the deadline.  No message, and no exception while
+handling one, ends the run.
 """
 
 from __future__ import annotations
@@ -23,12 +29,13 @@ import numpy as np
 
 from agents.base import EpisodeContext, make_policy, policy_class
 from agents.rollout import RolloutConfig, RolloutPolicy, base_controls, candidate_controls
+from bus.checks import Bounds, Rejections, check_choice, check_control, check_forecast
 from bus.delta import state_message
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
 from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
 from city.errors import ConfigError
-from city.sim import FleetSim, Requests, decisions_hash
+from city.sim import FleetSim, Observation, Requests, decisions_hash
 
 
 @dataclass(frozen=True)
@@ -116,35 +123,49 @@ class Coordinator:
         self.alive: set[int] = set()
         self.forecast_msg = b""
         self.stale = 0
+        self.bounds = Bounds(taxis=config.taxis, nodes=self.city.n_nodes, sectors=self.city.n_sectors, minutes=config.minutes)
+        self.rejected = Rejections(log)
+        #: The minute being played, against which proposed controls are checked.
+        self.obs: Observation | None = None
 
     # ------------------------------------------------------------------ inbox
     def _handle(self, item: tuple[str, str, object], want: tuple[int, int] | None = None) -> Control | None:
-        """Serve queries, track liveliness, and return the control ``want`` = (t, agent) if this item is it."""
+        """Serve queries, track liveliness, and return the control ``want`` = (t, agent) if this item is it.
+
+        Anything wrong with the item, or raised while handling it, drops it.
+        """
         tag, key, payload = item
+        try:
+            return self._handle_one(tag, key, payload, want)
+        except Exception as exc:  # one bad message never ends the run
+            self.rejected.exception(tag, key, exc)
+            return None
+
+    def _handle_one(self, tag: str, key: str, payload: object, want: tuple[int, int] | None) -> Control | None:
         if tag == "alive":
             agent = Keys.agent_of(key)
-            if agent is not None and 0 <= agent < self.cfg.taxis:
-                if payload:
-                    self.alive.add(agent)
-                else:
-                    self.alive.discard(agent)
-                    log(f"agent {agent} left")
-        elif tag in ("spec", "snapshot"):
-            answer = self.spec if tag == "spec" else Snapshot(state=self.full_state(), forecast=self.forecast_msg)
-            payload.reply(key, answer.encode())  # type: ignore[attr-defined]
-            payload.drop()  # type: ignore[attr-defined]  # ends the asker's get() now, not when the query is collected
-        elif tag == "control":
-            try:
-                c = decode(payload, Control, key)  # type: ignore[arg-type]
-            except WireError as exc:
-                log(f"ignored: {exc}")
-                return None
-            if Keys.agent_of(key) != c.agent:  # type: ignore[attr-defined]
-                log(f"ignored: {key}: control of agent {c.agent} on another agent's key")  # type: ignore[attr-defined]
-            elif want is not None and (c.t, c.agent) == want:  # type: ignore[attr-defined]
-                return c  # type: ignore[return-value]
+            if agent is None or not 0 <= agent < self.cfg.taxis:
+                raise WireError(f"{key}: a liveliness token of no agent of this run's {self.cfg.taxis}")
+            if payload:
+                self.alive.add(agent)
             else:
-                self.stale += 1
+                self.alive.discard(agent)
+                log(f"agent {agent} left")
+        elif tag in ("spec", "snapshot"):
+            try:
+                answer = self.spec if tag == "spec" else Snapshot(state=self.full_state(), forecast=self.forecast_msg)
+                payload.reply(key, answer.encode())  # type: ignore[attr-defined]
+            finally:
+                payload.drop()  # type: ignore[attr-defined]  # ends the asker's get() now, not when the query is collected
+        elif tag == "control":
+            c = check_control(decode(payload, Control, key), key, self.bounds)  # type: ignore[arg-type]
+            if c.by != "agent":
+                raise WireError(f"{key}: a proposed control must say by='agent', not {c.by!r}")
+            if self.obs is not None and c.t == self.obs.t:
+                check_choice(c, key, candidate_controls(self.city, self.obs, c.agent))
+            if want is not None and (c.t, c.agent) == want:
+                return c
+            self.stale += 1
         return None
 
     def full_state(self) -> bytes:
@@ -194,7 +215,7 @@ class Coordinator:
         t_start = time.perf_counter()
         for t in range(cfg.minutes):
             t0 = time.perf_counter()
-            obs = self.sim.observe()
+            obs = self.obs = self.sim.observe()
             if t % 60 == 0:
                 self.forecast_msg = self._forecast(session, inbox, t // 60)
                 pub_forecast.put(self.forecast_msg)
@@ -204,9 +225,6 @@ class Coordinator:
             u = base.copy()
             for agent in np.flatnonzero(obs.tau == 0).tolist():
                 got = self._turn(inbox, turn_pub[agent], t, agent)
-                if got is not None and got.control not in candidate_controls(self.city, obs, agent):
-                    log(f"minute {t}: agent {agent} proposed {got.control}, not one of its controls; base control used")
-                    got = None
                 if got is None:
                     fallbacks[agent] += 1
                     u[agent] = base[agent]
@@ -243,6 +261,7 @@ class Coordinator:
             "fallbacks_per_agent": fallbacks.tolist(),
             "controls": controls.tolist(),
             "stale_messages": self.stale,
+            "rejected_messages": dict(self.rejected.counts),
             "step_seconds": {"median": float(np.median(step_s)), "max": float(np.max(step_s))},
             "agent_plan_seconds": {"median": float(np.median(plan_s)) if plan_s else None,
                                    "max": float(np.max(plan_s)) if plan_s else None},
@@ -258,18 +277,27 @@ class Coordinator:
         when = self.start + dt.timedelta(hours=hour)
         request = ForecastRequest(hour=hour, when=when.isoformat()).encode()
         deadline = time.monotonic() + self.cfg.join_timeout_s
+        last = "no answer"
         while time.monotonic() < deadline:
             for reply in session.get(self.keys.predictor, payload=request, timeout=10.0):
-                if reply.ok is not None:
-                    msg = decode(reply.ok.payload.to_bytes(), ForecastMsg, self.keys.predictor)
-                    if msg.hour != hour or msg.eta.shape != (self.city.n_sectors,) or msg.rho.shape != (self.city.n_nodes,):  # type: ignore[attr-defined]
-                        raise ConfigError(f"{self.keys.predictor}: the forecast does not fit hour {hour} of this city")
-                    return reply.ok.payload.to_bytes()
-                why = reply.err.payload.to_bytes().decode(errors="replace")
-                if why != "Timeout":
-                    raise ConfigError(f"{self.keys.predictor}: the predictor refused hour {when:%Y-%m-%d %H}:00: {why}")
+                if reply.ok is None:
+                    why = reply.err.payload.to_bytes().decode(errors="replace")
+                    if why != "Timeout":
+                        last = f"the predictor refused hour {when:%Y-%m-%d %H}:00: {why}"
+                        self.rejected.drop("predictor: refused", f"{self.keys.predictor}: {last}; asking again")
+                    continue
+                try:
+                    payload = reply.ok.payload.to_bytes()
+                    msg = check_forecast(decode(payload, ForecastMsg, self.keys.predictor), self.keys.predictor, self.bounds)  # type: ignore[arg-type]
+                    if msg.hour != hour:
+                        raise WireError(f"{self.keys.predictor}: field 'hour' is {msg.hour}, asked for hour {hour}")
+                    return payload
+                except Exception as exc:  # a bad answer: drop it, ask again
+                    last = str(exc)
+                    self.rejected.exception("predictor", self.keys.predictor, exc)
             self._pace(inbox, time.perf_counter() + 0.5)
-        raise ConfigError(f"run {self.cfg.run!r}: no predictor answered on {self.keys.predictor} within {self.cfg.join_timeout_s:.0f} s")
+        raise ConfigError(f"run {self.cfg.run!r}: no acceptable forecast on {self.keys.predictor} within "
+                          f"{self.cfg.join_timeout_s:.0f} s (last: {last})")
 
     def _pace(self, inbox: Inbox, until: float) -> None:
         """Wait out the rest of the minute, still serving joins and snapshots."""
@@ -279,7 +307,7 @@ class Coordinator:
                 self._handle(item)
 
     def _turn(self, inbox: Inbox, pub, t: int, agent: int) -> Control | None:  # noqa: ANN001
-        """Give ``agent`` its turn and wait for its control until the deadline or its departure."""
+        """Give ``agent`` its turn and wait for one of its controls until the deadline or its departure."""
         if agent not in self.alive:
             return None
         pub.put(Turn(t=t, agent=agent).encode())

@@ -63,7 +63,7 @@ def serve_cmd(args) -> int:
 
     cfg = ServeConfig(run=args.run, scenario=args.scenario, data_dir=args.data, world_seed=args.world_seed,
                       forecast=args.forecast, model=args.model)
-    ForecastService(cfg).run(session_args(args))
+    ForecastService(cfg).run(session_args(args, identity="predictor"))
     return 0
 
 

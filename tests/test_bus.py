@@ -13,7 +13,7 @@ import pytest
 from agents.greedy import greedy_controls
 from bus.delta import StateView, state_message
 from bus.keys import Keys
-from bus.session import DEFAULT_ENDPOINT, SessionArgs, add_session_args, session_args
+from bus.session import DEFAULT_ENDPOINT, DEFAULT_TLS_ENDPOINT, INSECURE_WARNING, SessionArgs, add_session_args, session_args
 from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
 from city.errors import ConfigError
 from city.sim import FleetSim
@@ -112,11 +112,12 @@ def test_keys_and_ids() -> None:
         parse_ids("1,x")
 
 
-def test_session_settings() -> None:
+def test_session_settings(capsys: pytest.CaptureFixture) -> None:
     p = argparse.ArgumentParser()
     add_session_args(p)
-    assert session_args(p.parse_args([])).connect == [DEFAULT_ENDPOINT]
-    args = session_args(p.parse_args(["--mode", "peer", "-l", "tcp/127.0.0.1:7000"]))
+    assert session_args(p.parse_args(["--insecure"])).connect == [DEFAULT_ENDPOINT]
+    assert capsys.readouterr().err.strip() == INSECURE_WARNING
+    args = session_args(p.parse_args(["--insecure", "--mode", "peer", "-l", "tcp/127.0.0.1:7000"]))
     assert args.mode == "peer" and args.listen == ["tcp/127.0.0.1:7000"] and args.connect == []
     conf = args.zenoh_config()
     assert '"peer"' in conf.get_json("mode") and conf.get_json("scouting/multicast/enabled") == "false"
@@ -124,6 +125,38 @@ def test_session_settings() -> None:
         SessionArgs(connect=["7447"])
     with pytest.raises(ConfigError, match="zenoh config /nonexistent.json5: no such file"):
         SessionArgs(config="/nonexistent.json5").zenoh_config()
+
+
+def test_secured_session_settings(tmp_path) -> None:  # noqa: ANN001
+    from bus.certs import make_certs
+
+    p = argparse.ArgumentParser()
+    add_session_args(p)
+    with pytest.raises(ConfigError, match="pass --certs DIR .* or --insecure"):
+        session_args(p.parse_args([]))
+    with pytest.raises(ConfigError, match="--certs and --insecure: choose one"):
+        session_args(p.parse_args(["--certs", str(tmp_path), "--insecure"]))
+    with pytest.raises(ConfigError, match=f"--certs {tmp_path / 'none'}: no such directory"):
+        session_args(p.parse_args(["--certs", str(tmp_path / "none")]), identity="coordinator")
+    certs = tmp_path / "c"
+    make_certs(certs, 2)
+    client = session_args(p.parse_args(["--certs", str(certs)]), identity="taxi-1")
+    assert client.connect == [DEFAULT_TLS_ENDPOINT]
+    tls = client.overrides()["transport/link/tls"]
+    assert tls == {"root_ca_certificate": str(certs / "ca.pem"), "enable_mtls": True,
+                   "connect_certificate": str(certs / "taxi-1.pem"), "connect_private_key": str(certs / "taxi-1.key")}
+    assert client.overrides()["transport/link/protocols"] == ["tls"] and "access_control" not in client.overrides()
+    with pytest.raises(ConfigError, match="credentials of taxi-2: .*taxi-2.pem: no such file"):
+        client.as_identity("taxi-2").overrides()
+    router = session_args(p.parse_args(["--certs", str(certs), "--mode", "router"]), identity="router", run="r")
+    conf = router.overrides()
+    assert router.listen == [DEFAULT_TLS_ENDPOINT] and conf["transport/link/tls"]["listen_certificate"] == str(certs / "router.pem")
+    assert conf["access_control"]["default_permission"] == "deny"
+    assert '"deny"' in router.zenoh_config().get_json("access_control/default_permission")
+    with pytest.raises(ConfigError, match="endpoint 'tcp/127.0.0.1:1': a secured bus .* runs over tls/ endpoints"):
+        session_args(p.parse_args(["--certs", str(certs), "-e", "tcp/127.0.0.1:1"]))
+    with pytest.raises(ConfigError, match="use --mode client"):
+        session_args(p.parse_args(["--certs", str(certs), "--mode", "peer"]))
 
 
 def test_agent_processes_do_not_import_torch() -> None:

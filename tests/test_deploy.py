@@ -1,7 +1,9 @@
-"""A run across network hosts: router and coordinator on one Linux network namespace, agents on another.
+"""A secured run across network hosts: router and coordinator on one Linux network namespace, agents on another.
 
 Needs root (or CAP_NET_ADMIN) and iproute2; skipped where the namespaces
-cannot be made.  ``deploy/netns.sh`` builds the two hosts, as a user would.
+cannot be made.  ``deploy/netns.sh`` builds the two hosts, as a user would;
+the run uses mutual TLS and access control with credentials made for the
+router's address, as ``deploy/README.md`` describes.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from typing import Iterator
 
 import pytest
 
+from bus.certs import make_certs
 from coordinator.fleet import in_process
 from coordinator.runtime import FleetConfig
 
@@ -44,18 +47,20 @@ def on(host: str, *cmd: str) -> list[str]:
 
 
 def test_agents_on_another_host_make_the_in_process_decisions(hosts: str, tmp_path: Path) -> None:
-    h1, h2, endpoint = f"{hosts}-h1", f"{hosts}-h2", "tcp/10.77.0.1:7447"
-    out = tmp_path / "result.json"
+    h1, h2, endpoint = f"{hosts}-h1", f"{hosts}-h2", "tls/10.77.0.1:7447"
+    out, certs = tmp_path / "result.json", tmp_path / "certs"
+    make_certs(certs, 2, hosts=["10.77.0.1"])
+    secured = ["--certs", str(certs)]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    router = subprocess.Popen(on(h1, "router", "--listen", endpoint), stderr=subprocess.PIPE, text=True, env=env)
+    router = subprocess.Popen(on(h1, "router", *secured, "--listen", endpoint), stderr=subprocess.PIPE, text=True, env=env)
     procs = [router]
     try:
         wait = [sys.executable, "-c", "from bus.router import wait_for_tcp; wait_for_tcp('10.77.0.1', 7447, 30)"]
         subprocess.run(["ip", "netns", "exec", h2, *wait], check=True, env=env, timeout=60)
-        coord = subprocess.Popen(on(h1, "coordinator", "--connect", endpoint, "--run", "hosts", "--taxis", "2", "--minutes", "6",
+        coord = subprocess.Popen(on(h1, "coordinator", *secured, "--connect", endpoint, "--run", "hosts", "--taxis", "2", "--minutes", "6",
                                     "--forecast", "true-rate", "--samples", "50", "--deadline", "120", "--join-timeout", "300", "--json", str(out)),
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-        agents = subprocess.Popen(on(h2, "agents", "--connect", endpoint, "--run", "hosts", "--ids", "0-1"),
+        agents = subprocess.Popen(on(h2, "agents", *secured, "--connect", endpoint, "--run", "hosts", "--ids", "0-1"),
                                   stderr=subprocess.PIPE, text=True, env=env)
         procs += [coord, agents]
         _, err = coord.communicate(timeout=240)

@@ -15,6 +15,7 @@ from typing import Iterator
 
 import pytest
 
+from bus.certs import make_certs
 from bus.router import free_tcp_port, wait_for_tcp
 from coordinator.fleet import in_process, run_local_fleet
 from coordinator.runtime import FleetConfig
@@ -24,15 +25,17 @@ pytestmark = pytest.mark.usefixtures("compiled_kernels")
 
 
 @pytest.mark.parametrize(
-    ("policy", "options", "predictor"),
-    [("surge", {"forecast": "true-rate", "samples": 100}, True), ("garces2023", {"samples": 50, "horizon": 5}, False)],
+    ("policy", "options", "predictor", "secure"),
+    [("surge", {"forecast": "true-rate", "samples": 100}, True, True), ("garces2023", {"samples": 50, "horizon": 5}, False, False)],
 )
-def test_distributed_run_makes_the_in_process_decisions(policy: str, options: dict, predictor: bool) -> None:
-    """surge takes its forecasts from a predictor service process; garces2023 from the coordinator."""
+def test_distributed_run_makes_the_in_process_decisions(policy: str, options: dict, predictor: bool, secure: bool) -> None:
+    """surge takes its forecasts from a predictor service process over mutual TLS and access control;
+    garces2023 from the coordinator, on an insecure bus."""
     cfg = FleetConfig(run=f"same-{policy}", taxis=3, minutes=8, policy=policy, options=options, deadline_s=120,
                       join_timeout_s=300, predictor=predictor)
-    dist = run_local_fleet(cfg)
+    dist = run_local_fleet(cfg, secure=secure)
     ref = in_process(cfg)
+    assert dist["secured"] is secure
     assert dist["fallbacks"] == 0 and dist["agents_exit_codes"] == [0, 0, 0]
     assert sum(dist["planned_per_agent"]) > 0
     assert dist["decisions_sha256"] == ref["decisions_sha256"]
@@ -40,13 +43,16 @@ def test_distributed_run_makes_the_in_process_decisions(policy: str, options: di
 
 
 @pytest.fixture(scope="module")
-def router() -> Iterator[str]:
+def router(tmp_path_factory: pytest.TempPathFactory) -> Iterator[list[str]]:
+    """A secured router; the flags that reach it."""
+    certs = tmp_path_factory.mktemp("runtime") / "certs"
+    make_certs(certs, 3)
     port = free_tcp_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    proc = subprocess.Popen([*CLI, "router", "--listen", endpoint], stderr=subprocess.PIPE, text=True)
+    endpoint = f"tls/127.0.0.1:{port}"
+    proc = subprocess.Popen([*CLI, "router", "--certs", str(certs), "--listen", endpoint], stderr=subprocess.PIPE, text=True)
     try:
         wait_for_tcp("127.0.0.1", port, 30)
-        yield endpoint
+        yield ["--connect", endpoint, "--certs", str(certs)]
     finally:
         proc.terminate()
         proc.wait(10)
@@ -57,8 +63,8 @@ import sys, time, zenoh
 from bus.keys import Keys
 from bus.session import SessionArgs, open_session
 from bus.wire import Control
-keys, deadline = Keys(sys.argv[1]), float(sys.argv[3])
-with open_session(SessionArgs(mode="client", connect=[sys.argv[2]])) as s:
+keys, deadline = Keys(sys.argv[1]), float(sys.argv[4])
+with open_session(SessionArgs(mode="client", connect=[sys.argv[2]], certs=sys.argv[3], identity="taxi-1")) as s:
     turns = s.declare_subscriber(keys.turn(1), zenoh.handlers.FifoChannel(16))
     token = s.liveliness().declare_token(keys.alive(1))
     turns.recv()
@@ -69,17 +75,18 @@ with open_session(SessionArgs(mode="client", connect=[sys.argv[2]])) as s:
 """
 
 
-def test_silent_agent_gets_base_controls_bad_messages_are_ignored_and_a_restarted_agent_rejoins(router: str, tmp_path: Path) -> None:
+def test_silent_agent_gets_base_controls_bad_messages_are_ignored_and_a_restarted_agent_rejoins(router: list[str], tmp_path: Path) -> None:
     run, out, deadline = "rejoin", tmp_path / "result.json", 2.0
     coord = subprocess.Popen(
-        [*CLI, "coordinator", "--connect", router, "--run", run, "--taxis", "3", "--minutes", "30", "--forecast", "true-rate",
+        [*CLI, "coordinator", *router, "--run", run, "--taxis", "3", "--minutes", "30", "--forecast", "true-rate",
          "--samples", "50", "--deadline", str(deadline), "--minute-seconds", "0.5", "--join-timeout", "300", "--json", str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
-    others = subprocess.Popen([*CLI, "agents", "--connect", router, "--run", run, "--ids", "0,2"], stderr=subprocess.PIPE, text=True)
-    impostor = subprocess.run([sys.executable, "-c", IMPOSTOR, run, router, str(deadline)], capture_output=True, text=True, timeout=120)
+    others = subprocess.Popen([*CLI, "agents", *router, "--run", run, "--ids", "0,2"], stderr=subprocess.PIPE, text=True)
+    impostor = subprocess.run([sys.executable, "-c", IMPOSTOR, run, router[1], router[3], str(deadline)], capture_output=True,
+                              text=True, timeout=120)
     assert impostor.returncode == 0, impostor.stderr
-    restarted = subprocess.Popen([*CLI, "agents", "--connect", router, "--run", run, "--ids", "1"], stderr=subprocess.PIPE, text=True)
+    restarted = subprocess.Popen([*CLI, "agents", *router, "--run", run, "--ids", "1"], stderr=subprocess.PIPE, text=True)
     try:
         _, err = coord.communicate(timeout=180)
         assert coord.returncode == 0, err
@@ -97,8 +104,8 @@ def test_silent_agent_gets_base_controls_bad_messages_are_ignored_and_a_restarte
     assert len(result["controls"]) == 30
 
 
-def test_coordinator_without_agents_fails_in_one_line(router: str) -> None:
-    proc = subprocess.run([*CLI, "coordinator", "--connect", router, "--run", "lonely", "--taxis", "2", "--forecast", "true-rate",
+def test_coordinator_without_agents_fails_in_one_line(router: list[str]) -> None:
+    proc = subprocess.run([*CLI, "coordinator", *router, "--run", "lonely", "--taxis", "2", "--forecast", "true-rate",
                            "--join-timeout", "1"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines()[-1] == "surge: error: run 'lonely': 0 of 2 agents joined within 1 s; missing 0, 1"
@@ -111,6 +118,7 @@ def test_fleet_command_checks_against_in_process(tmp_path: Path) -> None:
                            "--json", str(out)], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "decisions identical" in proc.stdout and "minute 5/5" in proc.stderr
+    assert "secured: mutual TLS and access control" in proc.stderr and "bus: mutual TLS, access control" in proc.stdout
     doc = json.loads(out.read_text())
     assert doc["same_decisions"] and doc["wall_seconds"] < time.monotonic() - t0
 
@@ -119,7 +127,7 @@ ASK = """
 import sys
 from bus.session import SessionArgs, open_session
 from bus.wire import ForecastMsg, ForecastRequest, decode
-with open_session(SessionArgs(mode="client", connect=[sys.argv[1]])) as s:
+with open_session(SessionArgs(mode="client", connect=[sys.argv[1]], certs=sys.argv[2], identity="coordinator")) as s:
     for req in (b"junk", ForecastRequest(hour=0, when="2022-11-17T19:00:00").encode(),
                 ForecastRequest(hour=1, when="2022-11-17T20:00:00").encode()):
         for rep in s.get("surge/ask/predictor", payload=req, timeout=20.0):
@@ -131,14 +139,14 @@ with open_session(SessionArgs(mode="client", connect=[sys.argv[1]])) as s:
 """
 
 
-def test_predictor_service_refuses_bad_requests_and_keeps_serving(router: str, synthetic_scenario) -> None:  # noqa: ANN001
+def test_predictor_service_refuses_bad_requests_and_keeps_serving(router: list[str], synthetic_scenario) -> None:  # noqa: ANN001
     import datetime as dt
 
-    serve = subprocess.Popen([*CLI, "predictor", "serve", "--connect", router, "--run", "ask", "--forecast", "true-rate"],
+    serve = subprocess.Popen([*CLI, "predictor", "serve", *router, "--run", "ask", "--forecast", "true-rate"],
                              stderr=subprocess.PIPE, text=True)
     try:
         assert "serving true-rate forecasts" in serve.stderr.readline()
-        out = subprocess.run([sys.executable, "-c", ASK, router], capture_output=True, text=True, timeout=120)
+        out = subprocess.run([sys.executable, "-c", ASK, router[1], router[3]], capture_output=True, text=True, timeout=120)
     finally:
         serve.terminate()
         serve.wait(10)
