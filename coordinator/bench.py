@@ -23,6 +23,40 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+#: TLC LocationIDs of Manhattan except 103–105 (zone 103's polygon covers 103–105 in the TLC shapefile).
+MANHATTAN_ZONES = (4, 12, 13, 24, 41, 42, 43, 45, 48, 50, 68, 74, 75, 79, 87, 88, 90, 100, 107, 113, 114, 116, 120, 125,
+                   127, 128, 137, 140, 141, 142, 143, 144, 148, 151, 152, 153, 158, 161, 162, 163, 164, 166, 170, 186, 194,
+                   202, 209, 211, 224, 229, 230, 231, 232, 233, 234, 236, 237, 238, 239, 243, 244, 246, 249, 261, 262, 263)
+
+
+def manhattan_scenario(data_dir: str | Path, seed: int = 0):  # noqa: ANN201
+    """All of Manhattan (66 zones) with a synthetic demand world on the real map, the city cached under ``$SURGE_CACHE``.
+
+    A bench helper until the scenario files offer ``manhattan``: it builds the
+    map with :func:`city.nyc.load_nyc_city` and the world as ``load_scenario``
+    does for ``nyc`` without trip records.
+    """
+    from city.demand import synthetic_world
+    from city.graph import City
+    from city.nyc import load_nyc_city
+    from city.poi import read_poi_csv
+    from city.scenario import Scenario, cache_dir
+    from city.weather import read_weather_csv
+
+    data_dir = Path(data_dir)
+    path = cache_dir() / "city-bench-manhattan-66.npz"
+    if path.exists():
+        city = City.load(path)
+    else:
+        city = load_nyc_city(data_dir, zones=list(MANHATTAN_ZONES))
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        city.save(tmp)
+        os.replace(tmp, path)
+    weather = read_weather_csv(data_dir / "nyc" / "weather" / "airports_hourly_2022.csv", station="LGA", year=2022)
+    pois = read_poi_csv(data_dir / "nyc" / "poi" / "nyc_points_of_interest.csv")
+    return Scenario(name="manhattan", city=city, world=synthetic_world(city, year=2022, seed=seed, weather=weather, pois=pois), data_dir=data_dir)
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmarks: city build, simulator speed, planning time")
     bsub = p.add_subparsers(dest="bench", required=True, metavar="BENCH")
