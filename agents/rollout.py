@@ -253,7 +253,9 @@ class Shortcuts:
         within the horizon; they never pick up, so no cost changes.
     minute_lists : bool
         The nearest-request lists once per minute over every outstanding
-        request (the pruned ones marked gone), not once per agent.
+        request (the pruned ones marked gone), not once per agent.  Off by
+        default: building them per agent is cheap, and a per-agent list of the
+        tracked requests alone was faster to search on all of Manhattan.
     rows : bool
         Contiguous transposed distance rows for the arrival checks.
     """
@@ -261,7 +263,7 @@ class Shortcuts:
     skip: bool = True
     shadow: bool = True
     reach: bool = True
-    minute_lists: bool = True
+    minute_lists: bool = False
     rows: bool = True
 
     @classmethod
