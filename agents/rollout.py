@@ -546,7 +546,8 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool) -> 
         ctx.stats.add(True, False, 0, 0)
         return int(inp.cands[0])
     if ctx.config.adaptive is not None:
-        return adaptive_choice(ctx, inp, serial)
+        # Batches are short: in the calling thread, without the start-up of a parallel region per batch.
+        return adaptive_choice(ctx, inp, serial=True)
     costs, settled = _run(ctx, inp, 0, S, np.ones(n_c, dtype=bool), serial)
     shadowed = int(settled.sum())
     ctx.stats.add(False, n_c > 1 and shadowed == (n_c - 1) * S, n_c * S - shadowed, shadowed)
