@@ -50,7 +50,15 @@ decision; and with ``prune`` (a radius in hops, ``2 (H + 1)`` by default)
 taxis and requests farther than that from the deciding agent are left out.
 Every shortcut but pruning is exact (``tests/test_rollout.py`` compares the
 costs with the simulator); pruning is validated there to reproduce the
-unpruned decisions on seeded states.
+unpruned decisions on seeded states.  The exact savings of
+:class:`Shortcuts` (skip a decision no candidate can change, replay the
+non-pickup candidates for the agent alone, leave out taxis that cannot reach
+a pickup, transposed distance rows) are switchable, and
+``tests/test_planning_speed.py`` shows each leaves every decision as it was.
+Two approximations are options, off by default: ``adaptive`` (successive
+elimination of candidates on paired differences) and ``cap`` (the agent's
+nearest taxis only).  Independent agents can plan at once
+(:mod:`agents.waves`, the policy's ``workers``), with the same decisions.
 """
 
 from __future__ import annotations
@@ -729,6 +737,8 @@ class RolloutPolicy(Policy):
     def _act_waves(self, ctx: StepContext, u: np.ndarray) -> None:
         """Plan wave by wave, the agents of a wave in ``workers`` threads (each agent's samples in its thread, GIL released).
 
+        A wave of one agent runs its samples in parallel, as without workers.
+
         Threads, not processes: the agents share the city and the minute's
         context, and the kernel runs without the GIL, so only the short
         Python preparation of each decision is serialised.  An agent reads
@@ -744,6 +754,10 @@ class RolloutPolicy(Policy):
         if self._pool is None:
             self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix="surge-plan")
         for group in waves.groups():
+            if group.size == 1:
+                # A wave of one: its samples in parallel instead.
+                u[group[0]] = plan_agent(ctx, u[: group[0]], int(group[0]))
+                continue
             seen = u.copy()
             u[group] = list(self._pool.map(lambda a: _plan(ctx, seen[:a], int(a), serial=True), group))
 
