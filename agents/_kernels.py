@@ -192,6 +192,22 @@ def nearest_lists(dist: np.ndarray, pickups: np.ndarray, k: int) -> tuple[np.nda
 
 
 @njit(cache=True)
+def reaches(nodes: np.ndarray, free_from: np.ndarray, spots: np.ndarray, horizon: int, dist: np.ndarray) -> np.ndarray:
+    """Whether a taxi free from step ``free_from[i]`` at ``nodes[i]`` can stand on one of ``spots`` by step ``horizon``."""
+    out = np.zeros(nodes.shape[0], dtype=np.bool_)
+    for i in range(nodes.shape[0]):
+        slack = horizon - free_from[i]
+        if slack < 0:
+            continue
+        row = dist[nodes[i]]
+        for j in range(spots.shape[0]):
+            if row[spots[j]] <= slack:
+                out[i] = True
+                break
+    return out
+
+
+@njit(cache=True)
 def step_zero(
     controls: np.ndarray,
     pos: np.ndarray,
@@ -244,6 +260,7 @@ def _nearest(
     e_pick: np.ndarray,
     a_pick: np.ndarray,
     dist: np.ndarray,
+    dist_t: np.ndarray,
 ) -> tuple[int, int, int]:
     """The alive request nearest to node ``v`` by ``(distance, code)``; ``(BIG, -1)`` if none.
 
@@ -272,18 +289,17 @@ def _nearest(
                 if d < best_d:
                     best_d = d
                     best_c = r
-    row = dist[v]
     if lb >= 0:
         for a in range(seen, n_seen):
             if alive[r0 + a]:
-                lb = min(lb, np.int64(row[a_pick[a]]))
+                lb = min(lb, np.int64(dist_t[a_pick[a], v]))
         if lb >= best_d:
             return best_d, best_c, lb
     arr_d = _BIG
     for j in range(n_act):
         c = act[j]
         if alive[c]:
-            d = np.int64(row[a_pick[c - r0]])
+            d = np.int64(dist_t[a_pick[c - r0], v])
             arr_d = min(arr_d, d)
             if d < best_d or (d == best_d and c < best_c):
                 best_d = d
@@ -323,10 +339,10 @@ def _oldest_at(
 
 
 @njit(cache=True)
-def _walk(v: int, target: int, hops: int, next_hop: np.ndarray) -> int:
-    """The node ``hops`` hops from ``v`` along the shortest path to ``target``."""
+def _walk(v: int, target: int, hops: int, hop_t: np.ndarray) -> int:
+    """The node ``hops`` hops from ``v`` along the shortest path to ``target`` (``hop_t[target, v]`` is v's next hop)."""
     for _ in range(hops):
-        v = next_hop[v, target]
+        v = hop_t[target, v]
     return v
 
 
@@ -346,16 +362,23 @@ def _simulate_greedy(
     near: np.ndarray,
     near_d: np.ndarray,
     dist: np.ndarray,
-    next_hop: np.ndarray,
+    dist_t: np.ndarray,
+    hop_t: np.ndarray,
     act: np.ndarray,
     tgt: np.ndarray,
     kanc: np.ndarray,
     d0: np.ndarray,
     need: np.ndarray,
+    elig: np.ndarray,
     plan_c: np.ndarray,
     plan_d: np.ndarray,
-) -> int:
-    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``Σ g_k + g_H``.
+    ag: int,
+    rec_pos: np.ndarray,
+    rec_tgt: np.ndarray,
+    ev_step: np.ndarray,
+    ev_code: np.ndarray,
+) -> tuple[int, int, int]:
+    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``(Σ g_k + g_H, T, events)``.
 
     A free taxi heading for its nearest request keeps it as the nearest while
     it moves (the target gets exactly one hop closer, every other request at
@@ -369,18 +392,34 @@ def _simulate_greedy(
     ``plan_c``/``plan_d`` are the step-1 plans of the taxis free at step 1
     among the outstanding requests (the same in every sample; see
     :func:`_first_plans`), so that only the arrivals are compared here.
+
+    For the shadow shortcut (:func:`_shadow_greedy`), when ``ag >= 0`` the
+    deciding agent (taxi ``ag``) has its state recorded at the start of each
+    step, ``(node, target)`` in ``rec_pos``/``rec_tgt``, until ``T``, the first
+    step at which it stands at its target to pick up (``_BIG`` if never); when
+    ``ev_step`` is not empty every pickup is recorded there as (step, code).
     """
     r0 = e_pick.shape[0]
     mt = tpos.shape[0]
     n_act = 0
     ai = 0
     cost = 0
+    t_first = _BIG
+    n_ev = 0
+    record_ev = ev_step.shape[0] > 0
     for i in range(mt):
         need[i] = tfree[i] > 1
         tgt[i] = plan_c[i] if tfree[i] <= 1 else -1
         kanc[i] = 1
         d0[i] = plan_d[i]
     for k in range(1, horizon + 1):
+        if ag >= 0 and t_first == _BIG:
+            c = tgt[ag]
+            v = tpos[ag]
+            if c >= 0:
+                v = _walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(k - kanc[ag], d0[ag]), hop_t)
+            rec_pos[k] = v
+            rec_tgt[k] = c
         first_new = ai
         while ai < n_arr and a_step[ai] == k:
             act[n_act] = r0 + ai
@@ -388,6 +427,7 @@ def _simulate_greedy(
             n_alive += 1
             ai += 1
         # Plans for this step, from the state at its start.
+        n_el = 0
         for i in range(mt):
             if tfree[i] > k:
                 continue
@@ -398,36 +438,43 @@ def _simulate_greedy(
                 v = tpos[i]
                 if c >= 0:
                     p = e_pick[c] if c < r0 else a_pick[c - r0]
-                    v = _walk(v, p, min(k - kanc[i], d0[i]), next_hop)
-                d, c2, _ = _nearest(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
+                    v = _walk(v, p, min(k - kanc[i], d0[i]), hop_t)
+                d, c2, _ = _nearest(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
                 tpos[i] = v
                 kanc[i] = k
                 tgt[i] = c2
                 d0[i] = d
                 need[i] = False
                 continue
-            rem = kanc[i] + d0[i] - k
-            if rem <= 0:
-                continue
-            for a in range(first_new, ai):
-                p = a_pick[a]
-                if dist[tpos[i], p] >= d0[i]:
+            if ai > first_new and kanc[i] + d0[i] > k:
+                elig[n_el] = i
+                n_el += 1
+        # Taxis keeping their target meet this step's arrivals, arrival by arrival
+        # (each taxi's updates stay in arrival order; one distance row per arrival).
+        for a in range(first_new, ai):
+            p = a_pick[a]
+            row_t = dist_t[p]
+            for e in range(n_el):
+                i = elig[e]
+                if row_t[tpos[i]] >= d0[i]:
                     continue
+                rem = kanc[i] + d0[i] - k
                 ct = tgt[i]
                 pt = e_pick[ct] if ct < r0 else a_pick[ct - r0]
-                v = _walk(tpos[i], pt, k - kanc[i], next_hop)
-                d = np.int64(dist[v, p])
+                v = _walk(tpos[i], pt, k - kanc[i], hop_t)
+                d = np.int64(row_t[v])
                 tpos[i] = v
                 d0[i] = rem
                 kanc[i] = k
                 if d < rem:
                     tgt[i] = r0 + a
                     d0[i] = d
-                    rem = d
         # Pickups, in agent order, by the taxis standing at their target.
         for i in range(mt):
             if tfree[i] > k or tgt[i] < 0 or kanc[i] + d0[i] != k:
                 continue
+            if i == ag and t_first == _BIG:
+                t_first = k
             c = tgt[i]
             v = e_pick[c] if c < r0 else a_pick[c - r0]
             r = _oldest_at(v, alive, act, n_act, near, near_d, e_pick, a_pick)
@@ -435,6 +482,10 @@ def _simulate_greedy(
                 continue
             alive[r] = False
             n_alive -= 1
+            if record_ev:
+                ev_step[n_ev] = k
+                ev_code[n_ev] = r
+                n_ev += 1
             drop = e_drop[r] if r < r0 else a_drop[r - r0]
             tpos[i] = drop
             tfree[i] = k + 1 + max(1, np.int64(dist[v, drop]))
@@ -450,7 +501,109 @@ def _simulate_greedy(
                         n_act -= 1
                         break
         cost += n_alive
-    return cost + n_alive
+    return cost + n_alive, t_first, n_ev
+
+
+@njit(cache=True)
+def _shadow_greedy(
+    horizon: int,
+    c: int,
+    pos: int,
+    tgt: int,
+    d0: int,
+    alive: np.ndarray,
+    n_arr: int,
+    a_pick: np.ndarray,
+    a_step: np.ndarray,
+    e_pick: np.ndarray,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    dist: np.ndarray,
+    dist_t: np.ndarray,
+    hop_t: np.ndarray,
+    act: np.ndarray,
+    ev_step: np.ndarray,
+    ev_code: np.ndarray,
+    n_ev: int,
+    full: np.ndarray,
+    rec_pos: np.ndarray,
+    rec_tgt: np.ndarray,
+    rec_t: np.ndarray,
+) -> int:
+    """Candidate ``c``'s rollout replayed for the deciding agent alone; the candidate whose cost it has, or -1.
+
+    Greedy taxis interact only through pickups, so until the agent first
+    stands at its target (in ``c`` or in the reference candidate 0) every
+    other taxi of ``c`` does exactly what it does in candidate 0, whose
+    pickups (``ev_step``/``ev_code``) are replayed here.  If neither agent
+    reaches a pickup within the horizon the two costs are equal; if at the
+    start of a step the agent's (node, target) equals that of a fully
+    simulated candidate ``f`` (``full[f]``) that has not picked up yet either,
+    the whole states agree and so do the rest of the rollouts.  Otherwise
+    -1: ``c`` needs a full simulation.  ``alive`` holds candidate 0's alive
+    flags at step 1 (arrivals included) and is modified.
+    """
+    r0 = e_pick.shape[0]
+    t_ref = rec_t[0]
+    kanc = 1
+    need = False
+    n_act = 0
+    ai = 0
+    e = 0
+    for k in range(1, horizon + 2):
+        if k > t_ref:
+            return -1
+        if k == horizon + 1:
+            return 0
+        v = pos
+        if tgt >= 0:
+            v = _walk(v, e_pick[tgt] if tgt < r0 else a_pick[tgt - r0], min(k - kanc, d0), hop_t)
+        for f in range(c):
+            if full[f] and k <= rec_t[f] and rec_pos[f, k] == v and rec_tgt[f, k] == tgt:
+                return f
+        first_new = ai
+        while ai < n_arr and a_step[ai] == k:
+            act[n_act] = r0 + ai
+            n_act += 1
+            ai += 1
+        if tgt < 0 and not need and ai == first_new:
+            pass
+        elif need or tgt < 0:
+            d, c2, _ = _nearest(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+            pos = v
+            kanc = k
+            tgt = c2
+            d0 = d
+            need = False
+        elif kanc + d0 > k:
+            for a in range(first_new, ai):
+                p = a_pick[a]
+                if dist[pos, p] >= d0:
+                    continue
+                rem = kanc + d0 - k
+                v = _walk(pos, e_pick[tgt] if tgt < r0 else a_pick[tgt - r0], k - kanc, hop_t)
+                d = np.int64(dist[v, p])
+                pos = v
+                d0 = rem
+                kanc = k
+                if d < rem:
+                    tgt = r0 + a
+                    d0 = d
+        if tgt >= 0 and kanc + d0 == k:
+            return -1
+        while e < n_ev and ev_step[e] == k:
+            r = ev_code[e]
+            alive[r] = False
+            if r == tgt:
+                need = True
+            if r >= r0:
+                for j in range(n_act):
+                    if act[j] == r:
+                        act[j] = act[n_act - 1]
+                        n_act -= 1
+                        break
+            e += 1
+    return -1
 
 
 @njit(cache=True, inline="always")
@@ -503,7 +656,8 @@ def _simulate_ia(
     near: np.ndarray,
     near_d: np.ndarray,
     dist: np.ndarray,
-    next_hop: np.ndarray,
+    dist_t: np.ndarray,
+    hop_t: np.ndarray,
     act: np.ndarray,
     lb: np.ndarray,
     seen: np.ndarray,
@@ -545,7 +699,7 @@ def _simulate_ia(
         if nf > 0 and n_alive > 0:
             for f in range(nf):
                 i = free[f]
-                best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
+                best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
                 seen[i] = ai
             # A binary heap of (distance, taxi) keys; a key whose request was taken
             # meanwhile is refreshed when it surfaces (keys only ever grow).
@@ -560,7 +714,7 @@ def _simulate_ia(
                 c = best_c[f]
                 if not alive[c]:
                     i = free[f]
-                    best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
+                    best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
                     if best_c[f] >= 0:
                         n_h = _heap_push(heap, n_h, best_d[f] * mt + f)
                     continue
@@ -586,7 +740,7 @@ def _simulate_ia(
                 v = tpos[i]
                 p = e_pick[c] if c < r0 else a_pick[c - r0]
                 if p != v:
-                    tpos[i] = next_hop[v, p]
+                    tpos[i] = hop_t[p, v]
                     if lb[i] > 0:
                         lb[i] -= 1
                     continue
@@ -618,6 +772,7 @@ def _first_plans(
     near: np.ndarray,
     near_d: np.ndarray,
     dist: np.ndarray,
+    dist_t: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per candidate, each taxi free at step 1: its nearest outstanding request and distance."""
     n_c, mt = pos1.shape
@@ -627,7 +782,7 @@ def _first_plans(
     for c in range(n_c):
         for i in range(mt):
             if tfree1[c, i] <= 1:
-                plan_d[c, i], plan_c[c, i], _ = _nearest(pos1[c, i], -1, 0, 0, alive0[c], no_act, 0, near, near_d, e_pick, no_act, dist)
+                plan_d[c, i], plan_c[c, i], _ = _nearest(pos1[c, i], -1, 0, 0, alive0[c], no_act, 0, near, near_d, e_pick, no_act, dist, dist_t)
     return plan_c, plan_d
 
 
@@ -635,7 +790,12 @@ def _first_plans(
 def _run_samples(
     lo: int,
     hi: int,
+    s_lo: int,
     out: np.ndarray,
+    settled: np.ndarray,
+    active: np.ndarray,
+    shadow: np.ndarray,
+    ag: int,
     plan_c: np.ndarray,
     plan_d: np.ndarray,
     base: int,
@@ -662,9 +822,10 @@ def _run_samples(
     beta_cum: np.ndarray,
     max_arrivals: int,
     dist: np.ndarray,
-    next_hop: np.ndarray,
+    dist_t: np.ndarray,
+    hop_t: np.ndarray,
 ) -> None:
-    """Fill ``out[:, lo:hi]``: samples ``lo … hi-1`` of :func:`rollout_costs`, with scratch space of their own."""
+    """Fill ``out[:, lo-s_lo:hi-s_lo]``: samples ``lo … hi-1`` of :func:`rollout_costs`, with scratch space of their own."""
     n_c = alive0.shape[0]
     r0 = e_pick.shape[0]
     mt = pos1.shape[1]
@@ -685,12 +846,40 @@ def _run_samples(
     matched = np.empty(mt, dtype=np.int64)
     need = np.empty(mt, dtype=np.bool_)
     heap = np.empty(mt + 1, dtype=np.int64)
+    use_shadow = base == GREEDY and ag >= 0 and shadow[0]
+    n_ev_cap = r0 + cap if use_shadow else 0
+    ev_step = np.empty(n_ev_cap, dtype=np.int32)
+    ev_code = np.empty(n_ev_cap, dtype=np.int64)
+    no_ev = np.empty(0, dtype=np.int32)
+    no_code = np.empty(0, dtype=np.int64)
+    rec_pos = np.empty((n_c, horizon + 2), dtype=np.int64)
+    rec_tgt = np.empty((n_c, horizon + 2), dtype=np.int64)
+    rec_t = np.full(n_c, _BIG, dtype=np.int64)
+    full = np.zeros(n_c, dtype=np.bool_)
     for s in range(lo, hi):
         n_arr = sample_arrivals(
             key, s, horizon, minute0, mode, sectors, eta, pk_ptr, pk_node, pk_cum,
             dk_ptr, dk_node, dk_cum, beta_cum, rel_node, a_pick, a_drop, a_step,
         )
+        col = s - s_lo
+        n_ev = 0
         for c in range(n_c):
+            full[c] = False
+            settled[c, col] = False
+            if not active[c] and not (use_shadow and c == 0):
+                out[c, col] = 0
+                continue
+            if use_shadow and c > 0 and shadow[c]:
+                alive[:r0] = alive0[0]
+                alive[r0 : r0 + n_arr] = True
+                f = _shadow_greedy(
+                    horizon, c, pos1[c, ag], plan_c[c, ag], plan_d[c, ag], alive, n_arr, a_pick, a_step,
+                    e_pick, near, near_d, dist, dist_t, hop_t, act, ev_step, ev_code, n_ev, full, rec_pos, rec_tgt, rec_t,
+                )
+                if f >= 0:
+                    out[c, col] = out[f, col]
+                    settled[c, col] = True
+                    continue
             g0 = 0
             for r in range(r0):
                 alive[r] = alive0[c, r]
@@ -699,15 +888,22 @@ def _run_samples(
             tpos[:] = pos1[c]
             tfree[:] = tfree1[c]
             if base == GREEDY:
-                out[c, s] = g0 + _simulate_greedy(
+                rec = use_shadow and shadow[c]
+                cost, t_first, nev = _simulate_greedy(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
-                    e_pick, e_drop, near, near_d, dist, next_hop, act, target, seen, best_d, need,
-                    plan_c[c], plan_d[c],
+                    e_pick, e_drop, near, near_d, dist, dist_t, hop_t, act, target, seen, best_d, need, free,
+                    plan_c[c], plan_d[c], ag if rec else -1, rec_pos[c], rec_tgt[c],
+                    ev_step if (rec and c == 0) else no_ev, ev_code if (rec and c == 0) else no_code,
                 )
+                out[c, col] = g0 + cost
+                rec_t[c] = t_first
+                full[c] = rec
+                if c == 0:
+                    n_ev = nev
             else:
-                out[c, s] = g0 + _simulate_ia(
+                out[c, col] = g0 + _simulate_ia(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
-                    e_pick, e_drop, near, near_d, dist, next_hop,
+                    e_pick, e_drop, near, near_d, dist, dist_t, hop_t,
                     act, lb, seen, free, best_d, best_c, target, matched, heap,
                 )
 
@@ -716,7 +912,11 @@ def _run_samples(
 def rollout_costs(
     base: int,
     horizon: int,
-    n_samples: int,
+    s_lo: int,
+    s_hi: int,
+    active: np.ndarray,
+    shadow: np.ndarray,
+    ag: int,
     key: np.uint64,
     minute0: int,
     mode: int,
@@ -739,9 +939,10 @@ def rollout_costs(
     beta_cum: np.ndarray,
     max_arrivals: int,
     dist: np.ndarray,
-    next_hop: np.ndarray,
+    dist_t: np.ndarray,
+    hop_t: np.ndarray,
     n_chunks: int,
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray]:
     """Rollout cost of every candidate (rows of ``alive0``/``pos1``/``tfree1``) in every sample.
 
     ``e_pick``/``e_drop`` are the outstanding requests the rollout tracks
@@ -750,14 +951,72 @@ def rollout_costs(
     by all candidates (common random numbers).  Samples run in parallel in
     ``n_chunks`` contiguous chunks with per-chunk scratch space; the result
     does not depend on the number of threads or chunks.
+
+    Samples ``s_lo … s_hi-1`` are run, for the candidates flagged ``active``
+    (the others get 0).  With the greedy base and ``shadow[0]``, candidates
+    flagged in ``shadow`` (every candidate but pickup) are first replayed
+    for the agent alone (taxi ``ag``, see :func:`_shadow_greedy`); the second
+    result flags the (candidate, sample) costs settled that way.
     """
+    n_samples = s_hi - s_lo
     out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)
-    plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist)
+    settled = np.zeros((alive0.shape[0], n_samples), dtype=np.bool_)
+    plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist, dist_t)
     n_chunks = max(1, min(n_samples, n_chunks))
     for chunk in prange(n_chunks):
         _run_samples(
-            chunk * n_samples // n_chunks, (chunk + 1) * n_samples // n_chunks, out, plan_c, plan_d,
-            base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
-            sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals, dist, next_hop,
+            s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
+            active, shadow, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
+            sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals, dist, dist_t, hop_t,
         )
-    return out
+    return out, settled
+
+
+@njit(cache=True, nogil=True)
+def rollout_costs_serial(
+    base: int,
+    horizon: int,
+    s_lo: int,
+    s_hi: int,
+    active: np.ndarray,
+    shadow: np.ndarray,
+    ag: int,
+    key: np.uint64,
+    minute0: int,
+    mode: int,
+    alive0: np.ndarray,
+    pos1: np.ndarray,
+    tfree1: np.ndarray,
+    e_pick: np.ndarray,
+    e_drop: np.ndarray,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    rel_node: np.ndarray,
+    sectors: np.ndarray,
+    eta: np.ndarray,
+    pk_ptr: np.ndarray,
+    pk_node: np.ndarray,
+    pk_cum: np.ndarray,
+    dk_ptr: np.ndarray,
+    dk_node: np.ndarray,
+    dk_cum: np.ndarray,
+    beta_cum: np.ndarray,
+    max_arrivals: int,
+    dist: np.ndarray,
+    dist_t: np.ndarray,
+    hop_t: np.ndarray,
+    n_chunks: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`rollout_costs` in the calling thread, without the GIL: for planning several agents at once."""
+    n_samples = s_hi - s_lo
+    out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)
+    settled = np.zeros((alive0.shape[0], n_samples), dtype=np.bool_)
+    plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist, dist_t)
+    n_chunks = max(1, min(n_samples, n_chunks))
+    for chunk in range(n_chunks):
+        _run_samples(
+            s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
+            active, shadow, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
+            sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals, dist, dist_t, hop_t,
+        )
+    return out, settled

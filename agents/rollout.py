@@ -50,13 +50,22 @@ decision; and with ``prune`` (a radius in hops, ``2 (H + 1)`` by default)
 taxis and requests farther than that from the deciding agent are left out.
 Every shortcut but pruning is exact (``tests/test_rollout.py`` compares the
 costs with the simulator); pruning is validated there to reproduce the
-unpruned decisions on seeded states.
+unpruned decisions on seeded states.  The exact savings of
+:class:`Shortcuts` (skip a decision no candidate can change, replay the
+non-pickup candidates for the agent alone, leave out taxis that cannot reach
+a pickup, transposed distance rows) are switchable, and
+``tests/test_planning_speed.py`` shows each leaves every decision as it was.
+Two approximations are options, off by default: ``adaptive`` (successive
+elimination of candidates on paired differences) and ``cap`` (the agent's
+nearest taxis only).  Independent agents can plan at once
+(:mod:`agents.waves`, the policy's ``workers``), with the same decisions.
 """
 
 from __future__ import annotations
 
 import datetime as dt
-from dataclasses import dataclass, replace
+import threading
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -101,6 +110,16 @@ class RolloutConfig:
     prune : int or None
         Leave out taxis and requests farther than this many hops (either
         direction) from the deciding agent; ``None`` simulates the whole map.
+    cap : int or None
+        Approximation, off by default: simulate at most this many taxis, the
+        agent and its nearest (in hops, either direction), besides the radius.
+    adaptive : float or None
+        Approximation, off by default: run the samples in batches of
+        ``batch`` and drop a candidate once its mean paired difference from
+        the best candidate (common random numbers) exceeds ``adaptive``
+        standard errors; the decision is the best of those left.
+    batch : int
+        Samples per batch of ``adaptive``.
     """
 
     horizon: int = 10
@@ -110,6 +129,9 @@ class RolloutConfig:
     ce: str = "limited"
     seed: int = 0
     prune: int | None = None
+    cap: int | None = None
+    adaptive: float | None = None
+    batch: int = 100
 
     def __post_init__(self) -> None:
         if self.horizon < 1 or self.samples < 1:
@@ -122,6 +144,12 @@ class RolloutConfig:
             raise ConfigError(f"rollout: unknown certainty equivalence {self.ce!r}; choose from {', '.join(CE_MODES)}")
         if self.prune is not None and self.prune < 0:
             raise ConfigError(f"rollout: prune radius must be non-negative, got {self.prune}")
+        if self.cap is not None and self.cap < 1:
+            raise ConfigError(f"rollout: cap must be at least 1 taxi, got {self.cap}")
+        if self.adaptive is not None and not self.adaptive > 0:
+            raise ConfigError(f"rollout: adaptive must be a positive number of standard errors, got {self.adaptive}")
+        if self.batch < 2:
+            raise ConfigError(f"rollout: batch must be at least 2 samples, got {self.batch}")
 
 
 def default_prune(horizon: int) -> int:
@@ -215,6 +243,71 @@ def _pools(city: City, p: np.ndarray, sizes: np.ndarray, rng: np.random.Generato
 
 
 @dataclass(frozen=True)
+class Shortcuts:
+    """The exact savings of the rollout; none changes a decision, and each can be switched off to show it.
+
+    Attributes
+    ----------
+    skip : bool
+        Greedy base: no simulation when no candidate can reach any possible
+        pickup within the horizon (every rollout is then the same; the agent stays).
+    shadow : bool
+        Greedy base: replay each non-pickup candidate for the agent alone
+        against the reference candidate's pickups, and take the cost of the
+        candidate it provably equals (no pickup by the agent in either, or
+        trajectories merged); only the others are simulated in full.
+    reach : bool
+        Greedy base: leave out taxis that cannot reach any possible pickup
+        within the horizon; they never pick up, so no cost changes.
+    minute_lists : bool
+        The nearest-request lists once per minute over every outstanding
+        request (the pruned ones marked gone), not once per agent.  Off by
+        default: building them per agent is cheap, and a per-agent list of the
+        tracked requests alone was faster to search on all of Manhattan.
+    rows : bool
+        Contiguous transposed distance rows for the arrival checks.
+    """
+
+    skip: bool = True
+    shadow: bool = True
+    reach: bool = True
+    minute_lists: bool = False
+    rows: bool = True
+
+    @classmethod
+    def none(cls) -> Shortcuts:
+        return cls(skip=False, shadow=False, reach=False, minute_lists=False, rows=False)
+
+
+#: Nearest requests listed per node in the per-minute lists (a deeper list: pruned requests are in it).
+MINUTE_NEAR_K = 16
+
+
+class PlanStats:
+    """Counters of one minute's planning: decisions, those the shortcuts settled, simulations run and avoided."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.decisions = 0
+        self.skipped = 0
+        self.settled = 0
+        self.cand_samples = 0
+        self.shadowed = 0
+
+    def add(self, skipped: bool, settled: bool, cand_samples: int, shadowed: int) -> None:
+        with self._lock:
+            self.decisions += 1
+            self.skipped += int(skipped)
+            self.settled += int(settled or skipped)
+            self.cand_samples += cand_samples
+            self.shadowed += shadowed
+
+    def as_dict(self) -> dict:
+        return {"decisions": self.decisions, "skipped": self.skipped, "settled": self.settled,
+                "candidate_samples": self.cand_samples, "shadow_settled": self.shadowed}
+
+
+@dataclass(frozen=True)
 class StepContext:
     """Everything the agents of one minute share; a pure function of the observation and forecast.
 
@@ -229,6 +322,12 @@ class StepContext:
         The forecast of the minute's hour.
     minute0 : int
         Minutes since the forecast hour began.
+    shortcuts : Shortcuts
+        Exact savings in use (all by default).
+    near, near_d : ndarray or None
+        The minute's nearest-request lists over every outstanding request (``shortcuts.minute_lists``).
+    stats : PlanStats
+        What the minute's decisions cost and what the shortcuts settled.
     """
 
     city: City
@@ -237,6 +336,10 @@ class StepContext:
     base_controls: np.ndarray
     tables: DemandTables
     minute0: int
+    shortcuts: Shortcuts = field(default_factory=Shortcuts)
+    near: np.ndarray | None = None
+    near_d: np.ndarray | None = None
+    stats: PlanStats = field(default_factory=PlanStats)
 
 
 def base_controls(city: City, config: RolloutConfig, obs: Observation) -> np.ndarray:
@@ -245,9 +348,14 @@ def base_controls(city: City, config: RolloutConfig, obs: Observation) -> np.nda
     return base.astype(np.int32)
 
 
-def prepare_step(city: City, config: RolloutConfig, obs: Observation, tables: DemandTables, minute0: int) -> StepContext:
-    """The shared per-minute context: the base policy's joint control."""
-    return StepContext(city, config, obs, base_controls(city, config, obs), tables, int(minute0))
+def prepare_step(city: City, config: RolloutConfig, obs: Observation, tables: DemandTables, minute0: int,
+                 shortcuts: Shortcuts | None = None) -> StepContext:
+    """The shared per-minute context: the base policy's joint control and, with the shortcut, the nearest-request lists."""
+    sc = shortcuts or Shortcuts()
+    near = near_d = None
+    if sc.minute_lists and obs.req_pickup.size:
+        near, near_d = K.nearest_lists(city.dist, np.ascontiguousarray(obs.req_pickup, dtype=np.int32), MINUTE_NEAR_K)
+    return StepContext(city, config, obs, base_controls(city, config, obs), tables, int(minute0), sc, near, near_d)
 
 
 def candidate_controls(city: City, obs: Observation, agent: int) -> np.ndarray:
@@ -258,6 +366,114 @@ def candidate_controls(city: City, obs: Observation, agent: int) -> np.ndarray:
         cands.append(PICKUP)
     cands.extend(sorted(int(v) for v in city.neighbors(here)))
     return np.asarray(cands, dtype=np.int32)
+
+
+def relevant_nodes(city: City, config: RolloutConfig, here: int) -> np.ndarray:
+    """Nodes a decision at ``here`` looks at: within the pruning radius in either direction (all without pruning)."""
+    if config.prune is None:
+        return np.ones(city.n_nodes, dtype=bool)
+    return (city.dist[here] <= config.prune) | (city.dist[:, here] <= config.prune)
+
+
+@dataclass
+class _Inputs:
+    """One decision's kernel inputs (see :func:`agent_costs`)."""
+
+    cands: np.ndarray
+    skip: bool
+    args: tuple
+    ag: int
+    shadow: np.ndarray
+
+
+def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _Inputs:
+    city, cfg, obs, sc = ctx.city, ctx.config, ctx.obs, ctx.shortcuts
+    if obs.tau[agent] > 0:
+        raise ValueError(f"agent {agent} is busy; its only control is its next hop")
+    committed = np.asarray(committed, dtype=np.int32)
+    if committed.shape != (agent,):
+        raise ValueError(f"committed: expected {agent} controls, got {committed.shape}")
+    H = cfg.horizon
+    greedy = cfg.base == "greedy"
+    here = int(obs.pos[agent])
+    cands = candidate_controls(city, obs, agent)
+    controls = np.repeat(ctx.base_controls[None, :], cands.size, axis=0)
+    controls[:, :agent] = committed
+    controls[:, agent] = cands
+    req_pick = np.ascontiguousarray(obs.req_pickup, dtype=np.int32)
+    req_drop = np.ascontiguousarray(obs.req_dropoff, dtype=np.int32)
+    alive0, pos1, tfree1 = K.step_zero(controls, obs.pos, obs.tau, obs.dest, req_pick, req_drop, city.dist)
+
+    rel_node = relevant_nodes(city, cfg, here)
+    if cfg.scope == "local":
+        sectors = city.local_sectors(int(city.node_sector[here]))
+    else:
+        sectors = np.arange(city.n_sectors)
+    if cfg.prune is not None:
+        sectors = sectors[np.bincount(city.node_sector[rel_node], minlength=city.n_sectors)[sectors] > 0]
+    tab = ctx.tables
+    mode = CE_MODES[cfg.ce]
+    keep = (tfree1.min(axis=0) <= H) & rel_node[pos1].any(axis=0)
+    keep[agent] = True
+    rel_req = rel_node[req_pick]
+    skip = False
+    if greedy and (sc.reach or sc.skip):
+        # Where a pickup can happen within the horizon: tracked requests and possible arrivals.
+        spots = _pickup_spots(tab, sectors, mode, ctx.minute0, H, rel_node, req_pick[rel_req & alive0.any(axis=0)])
+        if sc.skip and PICKUP not in cands:
+            skip = not K.reaches(cands, np.ones(cands.size, np.int64), spots, H, city.dist).any()
+        if sc.reach and not skip:
+            others = np.flatnonzero(keep)
+            others = others[others != agent]
+            ok = K.reaches(pos1[0, others], tfree1[0, others].astype(np.int64), spots, H, city.dist)
+            keep[others[~ok]] = False
+    taxis = np.flatnonzero(keep)
+    if cfg.cap is not None and taxis.size > cfg.cap:
+        others = taxis[taxis != agent]
+        d = np.minimum(city.dist[here, obs.pos[others]], city.dist[obs.pos[others], here])
+        taxis = np.sort(np.concatenate([[agent], others[np.lexsort((others, d))[: cfg.cap - 1]]]))
+    ag = int(np.searchsorted(taxis, agent))
+    if sc.minute_lists and ctx.near is not None:
+        e_pick, e_drop = req_pick, req_drop
+        a0 = np.ascontiguousarray(alive0 & rel_req[None, :])
+        near, near_d = ctx.near, ctx.near_d
+    else:
+        tracked = np.flatnonzero(rel_req)
+        e_pick, e_drop = req_pick[tracked], req_drop[tracked]
+        a0 = np.ascontiguousarray(alive0[:, tracked])
+        near, near_d = K.nearest_lists(city.dist, e_pick, NEAR_K)
+    args = (
+        np.uint64(K.stream_key(cfg.seed, int(obs.t), agent)), ctx.minute0, mode,
+        a0, np.ascontiguousarray(pos1[:, taxis]), np.ascontiguousarray(tfree1[:, taxis]),
+        e_pick, e_drop, near, near_d, rel_node,
+        sectors.astype(np.int64), tab.eta, tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum,
+        tab.beta_cum, _max_arrivals(tab.eta[sectors], mode, ctx.minute0, H), city.dist,
+        *(_transposed(city) if sc.rows else (city.dist.T, city.next_hop.T)),
+    )
+    shadow = (cands != PICKUP) & (sc.shadow and greedy)
+    return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow))
+
+
+def _pickup_spots(tab: DemandTables, sectors: np.ndarray, mode: int, minute0: int, horizon: int,
+                  rel_node: np.ndarray, tracked_pickups: np.ndarray) -> np.ndarray:
+    """Nodes where a rollout can pick up: the tracked requests' and every possible arrival's (relevant) pickup node."""
+    eta = tab.eta[sectors]
+    if mode == K.LIMITED_CE:
+        live = sectors[eta > 0]
+    else:
+        m = minute0 + horizon
+        live = sectors[np.floor(eta * (m + 1) + 0.5) - np.floor(eta * (minute0 + 1) + 0.5) > 0]
+    parts = [tracked_pickups] + [tab.pk_node[tab.pk_ptr[q] : tab.pk_ptr[q + 1]] for q in live]
+    nodes = np.unique(np.concatenate(parts).astype(np.int32))
+    return np.ascontiguousarray(nodes[rel_node[nodes]])
+
+
+def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray, serial: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    cfg = ctx.config
+    if serial:
+        return K.rollout_costs_serial(BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, inp.ag, *inp.args, 1)
+    return K.rollout_costs(BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, inp.ag, *inp.args,
+                           8 * numba.get_num_threads())
 
 
 def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np.ndarray, np.ndarray]:
@@ -274,51 +490,32 @@ def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np
     -------
     candidates : ndarray (C,)
     costs : ndarray of int32, shape (C, samples)
-        Rollout cost of each candidate in each sample (common random numbers).
+        Rollout cost of each candidate in each sample (common random numbers),
+        the same with or without the exact shortcuts.
     """
-    city, cfg, obs = ctx.city, ctx.config, ctx.obs
-    if obs.tau[agent] > 0:
-        raise ValueError(f"agent {agent} is busy; its only control is its next hop")
-    committed = np.asarray(committed, dtype=np.int32)
-    if committed.shape != (agent,):
-        raise ValueError(f"committed: expected {agent} controls, got {committed.shape}")
-    H = cfg.horizon
-    here = int(obs.pos[agent])
-    cands = candidate_controls(city, obs, agent)
-    controls = np.repeat(ctx.base_controls[None, :], cands.size, axis=0)
-    controls[:, :agent] = committed
-    controls[:, agent] = cands
-    req_pick = np.ascontiguousarray(obs.req_pickup, dtype=np.int32)
-    req_drop = np.ascontiguousarray(obs.req_dropoff, dtype=np.int32)
-    alive0, pos1, tfree1 = K.step_zero(controls, obs.pos, obs.tau, obs.dest, req_pick, req_drop, city.dist)
+    inp = _decision_inputs(ctx, committed, agent)
+    costs, _ = _run(ctx, inp, 0, ctx.config.samples, np.ones(inp.cands.size, dtype=bool))
+    return inp.cands, costs
 
-    if cfg.prune is None:
-        rel_node = np.ones(city.n_nodes, dtype=bool)
-    else:
-        rel_node = (city.dist[here] <= cfg.prune) | (city.dist[:, here] <= cfg.prune)
-    tracked = np.flatnonzero(rel_node[req_pick])
-    keep = (tfree1.min(axis=0) <= H) & rel_node[pos1].any(axis=0)
-    keep[agent] = True
-    taxis = np.flatnonzero(keep)
-    near, near_d = K.nearest_lists(city.dist, req_pick[tracked], NEAR_K)
 
-    if cfg.scope == "local":
-        sectors = city.local_sectors(int(city.node_sector[here]))
-    else:
-        sectors = np.arange(city.n_sectors)
-    if cfg.prune is not None:
-        sectors = sectors[np.bincount(city.node_sector[rel_node], minlength=city.n_sectors)[sectors] > 0]
-    tab = ctx.tables
-    mode = CE_MODES[cfg.ce]
-    costs = K.rollout_costs(
-        BASES[cfg.base], H, cfg.samples, np.uint64(K.stream_key(cfg.seed, int(obs.t), agent)), ctx.minute0, mode,
-        np.ascontiguousarray(alive0[:, tracked]), np.ascontiguousarray(pos1[:, taxis]), np.ascontiguousarray(tfree1[:, taxis]),
-        req_pick[tracked], req_drop[tracked], near, near_d, rel_node,
-        sectors.astype(np.int64), tab.eta, tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum,
-        tab.beta_cum, _max_arrivals(tab.eta[sectors], mode, ctx.minute0, H), city.dist, city.next_hop,
-        8 * numba.get_num_threads(),
-    )
-    return cands, costs
+_TRANSPOSED: dict[int, tuple[City, np.ndarray, np.ndarray]] = {}
+_TRANSPOSED_LOCK = threading.Lock()
+
+
+def _transposed(city: City) -> tuple[np.ndarray, np.ndarray]:
+    """``city.dist`` and ``city.next_hop`` transposed and contiguous, made once per city.
+
+    The rollout reads distances *to* an arrival's pickup from many taxis and
+    walks many taxis *towards* one target: with the target's row contiguous
+    those reads stay in cache (``Shortcuts.rows``).  Costs one more copy of
+    each matrix per process.
+    """
+    with _TRANSPOSED_LOCK:
+        hit = _TRANSPOSED.get(id(city))
+        if hit is None or hit[0] is not city:
+            hit = (city, np.ascontiguousarray(city.dist.T), np.ascontiguousarray(city.next_hop.T))
+            _TRANSPOSED[id(city)] = hit
+    return hit[1], hit[2]
 
 
 def _max_arrivals(eta: np.ndarray, mode: int, minute0: int, horizon: int) -> int:
@@ -339,12 +536,67 @@ def choose(cands: np.ndarray, costs: np.ndarray) -> int:
 def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int) -> int:
     """One agent's rollout control: a pure function of the context, ``committed`` and ``agent``.
 
-    A busy agent gets its forced next hop without planning.
+    A busy agent gets its forced next hop without planning.  With
+    ``config.adaptive`` the samples run in batches and candidates are dropped
+    on the way (:func:`adaptive_choice`); otherwise the choice is
+    :func:`choose` over every sample, whatever exact shortcuts are on.
     """
+    return _plan(ctx, committed, agent, serial=False)
+
+
+def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool) -> int:
+    """:func:`plan_agent`; ``serial`` runs the samples in the calling thread without the GIL (same result)."""
     if ctx.obs.tau[agent] > 0:
         return int(ctx.base_controls[agent])
-    cands, costs = agent_costs(ctx, committed, agent)
-    return choose(cands, costs)
+    inp = _decision_inputs(ctx, committed, agent)
+    n_c, S = inp.cands.size, ctx.config.samples
+    if inp.skip:
+        ctx.stats.add(True, False, 0, 0)
+        return int(inp.cands[0])
+    if ctx.config.adaptive is not None:
+        # Batches are short: in the calling thread, without the start-up of a parallel region per batch.
+        return adaptive_choice(ctx, inp, serial=True)
+    costs, settled = _run(ctx, inp, 0, S, np.ones(n_c, dtype=bool), serial)
+    shadowed = int(settled.sum())
+    ctx.stats.add(False, n_c > 1 and shadowed == (n_c - 1) * S, n_c * S - shadowed, shadowed)
+    return choose(inp.cands, costs)
+
+
+def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False) -> int:
+    """Successive elimination with common random numbers, deterministic for a seed.
+
+    After each batch, the best candidate is the one of least total cost over
+    the samples so far among those left (first in order on ties); another is
+    dropped when the mean of its paired differences from the best exceeds
+    ``adaptive`` standard errors of that mean.  Stops when one is left or the
+    samples are used up, and returns the best of those left.
+    """
+    cfg = ctx.config
+    n_c = inp.cands.size
+    active = np.ones(n_c, dtype=bool)
+    parts: list[np.ndarray] = []
+    run = shadowed = 0
+    lo = 0
+    while lo < cfg.samples and active.sum() > 1:
+        hi = min(cfg.samples, lo + cfg.batch)
+        costs, settled = _run(ctx, inp, lo, hi, active, serial)
+        run += int(active.sum()) * (hi - lo) - int(settled.sum())
+        shadowed += int(settled.sum())
+        parts.append(costs.astype(np.int64))
+        lo = hi
+        allc = np.concatenate(parts, axis=1)
+        totals = np.where(active, allc.sum(axis=1), np.iinfo(np.int64).max)
+        best = int(np.argmin(totals))
+        diff = allc - allc[best]
+        n = allc.shape[1]
+        mean = diff.mean(axis=1)
+        se = diff.std(axis=1, ddof=1) / np.sqrt(n)
+        drop = active & (mean - cfg.adaptive * se > 0)
+        drop[best] = False
+        active &= ~drop
+    ctx.stats.add(False, False, run, shadowed)
+    totals = np.where(active, np.concatenate(parts, axis=1).sum(axis=1), np.iinfo(np.int64).max) if parts else np.zeros(n_c)
+    return int(inp.cands[int(np.argmin(totals))])
 
 
 def warm_up(city: City | None = None, config: RolloutConfig | None = None) -> None:
@@ -383,6 +635,19 @@ class RolloutPolicy(Policy):
         See :class:`RolloutConfig`.
     prune : int or None or "auto"
         Pruning radius in hops; ``"auto"`` is :func:`default_prune` of the horizon.
+    cap, adaptive, batch :
+        Approximations, off by default; see :class:`RolloutConfig`.
+    workers : int, optional
+        Threads planning independent agents at once (:mod:`agents.waves`);
+        1 (the default) plans one agent at a time with the samples in
+        parallel.  The decisions are the same either way.
+
+    Attributes
+    ----------
+    shortcuts : Shortcuts
+        Exact savings in use (all); benchmarks and tests switch them off to compare.
+    last_stats : PlanStats or None
+        The counters of the last :meth:`act`.
     """
 
     defaults: ClassVar[dict[str, Any]] = {}
@@ -396,10 +661,21 @@ class RolloutPolicy(Policy):
         Option("ce", str, choices=tuple(CE_MODES), help="certainty equivalence"),
         Option("seed", int, low=0, help="seed of every decision's random numbers"),
         Option("prune", int, low=0, words={"auto": "auto", "none": None}, help="pruning radius in hops"),
+        Option("cap", int, low=1, words={"none": None}, help="approximation: simulate only the agent's k nearest taxis"),
+        Option("adaptive", float, low=0, words={"none": None},
+               help="approximation: drop a candidate once it trails the best by this many standard errors"),
+        Option("batch", int, low=2, help="samples per batch of adaptive"),
+        Option("workers", int, low=1, help="threads planning independent agents of a minute concurrently"),
     )
+    shortcuts: Shortcuts = Shortcuts()
+    last_stats: PlanStats | None = None
 
-    def __init__(self, city: City, forecast: str | None = None, model: str | Path | None = None, **planner: Any) -> None:
+    def __init__(self, city: City, forecast: str | None = None, model: str | Path | None = None, workers: int | None = None,
+                 **planner: Any) -> None:
         super().__init__(city)
+        self.workers = int(workers) if workers is not None else 1
+        if self.workers < 1:
+            raise ConfigError(f"policy {self.name!r}: workers must be at least 1, got {workers}")
         try:
             self.config = self.rollout_config(**planner)
         except TypeError as exc:
@@ -407,6 +683,8 @@ class RolloutPolicy(Policy):
         self.provider: ForecastProvider = make_provider(forecast or self.defaults["forecast"], model)
         self.context: EpisodeContext | None = None
         self._tables: dict[int, DemandTables] = {}
+        self._pool = None
+        self.last_waves = None
 
     @classmethod
     def rollout_config(
@@ -418,6 +696,9 @@ class RolloutPolicy(Policy):
         ce: str | None = None,
         seed: int | None = None,
         prune: int | str | None = "auto",
+        cap: int | None = None,
+        adaptive: float | None = None,
+        batch: int | None = None,
     ) -> RolloutConfig:
         """The planner settings of this policy with ``None`` options at its defaults; no forecast is loaded."""
         d = cls.defaults
@@ -430,6 +711,9 @@ class RolloutPolicy(Policy):
             ce=ce or d["ce"],
             seed=int(seed if seed is not None else 0),
             prune=default_prune(H) if prune == "auto" else (None if prune is None else int(prune)),
+            cap=None if cap is None else int(cap),
+            adaptive=None if adaptive is None else float(adaptive),
+            batch=int(batch) if batch is not None else 100,
         )
 
     def reset(self, context: EpisodeContext) -> None:
@@ -453,14 +737,45 @@ class RolloutPolicy(Policy):
 
     def step_context(self, obs: Observation) -> StepContext:
         """The shared context of minute ``obs.t``."""
-        return prepare_step(self.city, self.config, obs, self.tables(obs.t // 60), obs.t % 60)
+        return prepare_step(self.city, self.config, obs, self.tables(obs.t // 60), obs.t % 60, self.shortcuts)
 
     def act(self, obs: Observation) -> np.ndarray:
         ctx = self.step_context(obs)
         u = ctx.base_controls.copy()
-        for agent in np.flatnonzero(obs.tau == 0):
-            u[agent] = plan_agent(ctx, u[:agent], int(agent))
+        if self.workers > 1:
+            self._act_waves(ctx, u)
+        else:
+            for agent in np.flatnonzero(obs.tau == 0):
+                u[agent] = plan_agent(ctx, u[:agent], int(agent))
+        self.last_stats = ctx.stats
         return u
+
+    def _act_waves(self, ctx: StepContext, u: np.ndarray) -> None:
+        """Plan wave by wave, the agents of a wave in ``workers`` threads (each agent's samples in its thread, GIL released).
+
+        A wave of one agent runs its samples in parallel, as without workers.
+
+        Threads, not processes: the agents share the city and the minute's
+        context, and the kernel runs without the GIL, so only the short
+        Python preparation of each decision is serialised.  An agent reads
+        the controls of the earlier waves; those of its own wave, still at
+        the base policy's, cannot change its costs (:mod:`agents.waves`).
+        """
+        from concurrent.futures import ThreadPoolExecutor
+
+        from agents.waves import plan_waves
+
+        waves = plan_waves(self.city, ctx.obs, self.config.prune)
+        self.last_waves = waves
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix="surge-plan")
+        for group in waves.groups():
+            if group.size == 1:
+                # A wave of one: its samples in parallel instead.
+                u[group[0]] = plan_agent(ctx, u[: group[0]], int(group[0]))
+                continue
+            seen = u.copy()
+            u[group] = list(self._pool.map(lambda a: _plan(ctx, seen[:a], int(a), serial=True), group))
 
 
 @register

@@ -25,6 +25,29 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+#: TLC LocationIDs of Manhattan except 103–105 (zone 103's polygon covers 103–105 in the TLC shapefile).
+MANHATTAN_ZONES = (4, 12, 13, 24, 41, 42, 43, 45, 48, 50, 68, 74, 75, 79, 87, 88, 90, 100, 107, 113, 114, 116, 120, 125,
+                   127, 128, 137, 140, 141, 142, 143, 144, 148, 151, 152, 153, 158, 161, 162, 163, 164, 166, 170, 186, 194,
+                   202, 209, 211, 224, 229, 230, 231, 232, 233, 234, 236, 237, 238, 239, 243, 244, 246, 249, 261, 262, 263)
+
+
+SHORTCUT_NAMES = ("skip", "shadow", "reach", "minute_lists", "rows")
+
+
+def shortcut_variant(name: str):  # noqa: ANN201
+    """``all``, ``none`` or ``no-NAME`` as :class:`agents.rollout.Shortcuts`; a bad name is a :class:`ConfigError`."""
+    from agents.rollout import Shortcuts
+    from city.errors import ConfigError
+
+    if name == "all":
+        return Shortcuts()
+    if name == "none":
+        return Shortcuts.none()
+    if name.startswith("no-") and name[3:] in SHORTCUT_NAMES:
+        return Shortcuts(**{name[3:]: False})
+    raise ConfigError(f"--variants: unknown variant {name!r}; choose all, none or no-NAME for NAME in {', '.join(SHORTCUT_NAMES)}")
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmarks: city build, simulator speed, planning time")
     bsub = p.add_subparsers(dest="bench", required=True, metavar="BENCH")
@@ -58,6 +81,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     pl.add_argument("--forecast", default=None, help="forecast provider for surge (garces2023 keeps previous-hour)")
     pl.add_argument("--model", default=None, help="trained predictor directory for surge's --forecast model")
     pl.add_argument("--threads", type=int, default=None, help="compiled-kernel threads (default: all cores)")
+    pl.add_argument("--workers", type=int, default=1, help="threads planning independent agents at once (agents.waves)")
+    pl.add_argument("--variants", nargs="+", default=["all"], metavar="VARIANT",
+                    help="exact-shortcut settings timed side by side on each step, in one process: all, none, or "
+                         f"no-NAME for NAME in {', '.join(SHORTCUT_NAMES)} (the first variant's controls are applied)")
     pl.add_argument("--json", default=None)
     pl.set_defaults(func=bench_plan)
 
@@ -138,14 +165,17 @@ def bench_sim(args: argparse.Namespace) -> int:
     return 0
 
 
-def _plan_child(args: argparse.Namespace, name: str) -> dict:
-    """Time ``name``'s planning in this (fresh) process; see :func:`bench_plan`."""
+def _plan_child(args: argparse.Namespace, label: str) -> dict:
+    """Time ``label``'s planning in this (fresh) process; see :func:`bench_plan`."""
+    import hashlib
+
     import numba
 
-    from agents.base import EpisodeContext, make_policy
+    from agents.base import EpisodeContext, make_policy, parse_policy
     from agents.greedy import greedy_controls
-    from city.scenario import load_scenario
+    from agents.waves import plan_waves
     from city.sim import FleetSim
+    from city.scenario import load_scenario
     from coordinator.evaluate import episode_requests, initial_positions
 
     if args.threads:
@@ -157,28 +187,57 @@ def _plan_child(args: argparse.Namespace, name: str) -> dict:
     sim = FleetSim(scen.city, requests, initial_positions(scen.city, args.taxis, args.seed))
     for _ in range(args.warmup):
         sim.step(greedy_controls(scen.city, sim.observe()))
-    policy = make_policy(name, scen.city, **rollout_options(args, [name]).get(name, {}))
+    name, own = parse_policy(label)
+    options = {**rollout_options(args, [name]).get(name, {}), **own}
+    if args.workers > 1:
+        options["workers"] = args.workers
+    policy = make_policy(name, scen.city, **options)
     policy.reset(EpisodeContext(scen.city, date, args.hour, minutes, args.seed, scen.world))
+    variants = {v: shortcut_variant(v) for v in args.variants}
     # One untimed call loads the compiled kernels from numba's cache (or compiles them).
     t0 = time.perf_counter()
     policy.act(sim.observe())
     first = time.perf_counter() - t0
-    times, free, outstanding = [], [], []
+    per_variant: dict[str, dict] = {v: {"plan_seconds": [], "cpu_seconds": [], "settled_share": [], "shadow_share": [],
+                                        "hashes": []} for v in variants}
+    free, outstanding, critical = [], [], []
     for _ in range(args.steps):
         obs = sim.observe()
-        t0 = time.perf_counter()
-        u = policy.act(obs)
-        times.append(time.perf_counter() - t0)
-        free.append(int((obs.tau == 0).sum()))
+        n_free = int((obs.tau == 0).sum())
+        free.append(n_free)
         outstanding.append(int(obs.req_index.size))
-        sim.step(u)
+        critical.append(plan_waves(scen.city, obs, policy.config.prune).critical_path)
+        applied = None
+        for v, shortcuts in variants.items():
+            policy.shortcuts = shortcuts
+            t0, c0 = time.perf_counter(), time.process_time()
+            u = policy.act(obs)
+            rec = per_variant[v]
+            rec["plan_seconds"].append(time.perf_counter() - t0)
+            rec["cpu_seconds"].append(time.process_time() - c0)
+            st = policy.last_stats
+            rec["settled_share"].append(st.settled / st.decisions if st.decisions else 0.0)
+            total = st.cand_samples + st.shadowed
+            rec["shadow_share"].append(st.shadowed / total if total else 0.0)
+            rec["hashes"].append(hashlib.sha256(np.asarray(u, np.int32).tobytes()).hexdigest()[:16])
+            if applied is None:
+                applied = u
+        sim.step(applied)
+    out_variants = {}
+    for v, rec in per_variant.items():
+        per_free = [t / f if f else 0.0 for t, f in zip(rec["plan_seconds"], free)]
+        out_variants[v] = {**rec, "plan_seconds_per_step": _stats(rec["plan_seconds"]),
+                           "cpu_seconds_per_step": _stats(rec["cpu_seconds"]), "seconds_per_free_taxi": per_free}
+    first_v = next(iter(out_variants.values()))
     return {
-        "plan_seconds_per_step": _stats(times),
-        "plan_seconds": times,
+        **first_v,
+        "variants": out_variants,
         "free_taxis": free,
         "outstanding_requests": outstanding,
+        "critical_path": critical,
         "first_call_seconds": first,
         "threads": numba.get_num_threads(),
+        "workers": args.workers,
         "peak_rss_mb": peak_rss_mb(),
         "city": scen.city.summary(),
     }
@@ -195,18 +254,21 @@ def bench_plan(args: argparse.Namespace) -> int:
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
-    from agents.base import policy_names
+    from agents.base import parse_policy, policy_names
     from city.errors import ConfigError
     from city.scenario import check_scenario
 
     check_scenario(args.scenario, args.data)
-    unknown = [p for p in args.policies if p not in policy_names()]
+    for v in args.variants:
+        shortcut_variant(v)
+    unknown = [p for p in args.policies if parse_policy(p)[0] not in policy_names()]
     if unknown:
         raise ConfigError(f"unknown policy {unknown[0]!r}; choose from {', '.join(policy_names())}")
     out: dict = {
         "schema": "surge.bench.plan/1",
         "cpus": os.cpu_count(),
-        "config": {k: getattr(args, k) for k in ("scenario", "date", "hour", "taxis", "horizon", "samples", "steps", "warmup", "seed", "forecast")},
+        "config": {k: getattr(args, k) for k in ("scenario", "date", "hour", "taxis", "horizon", "samples", "steps", "warmup", "seed",
+                                                 "forecast", "workers", "variants")},
         "policies": {},
     }
     for name in args.policies:
@@ -214,9 +276,16 @@ def bench_plan(args: argparse.Namespace) -> int:
             res = pool.submit(_plan_child, args, name).result()
         out["city"] = res.pop("city")
         out["policies"][name] = res
-        st = res["plan_seconds_per_step"]
-        print(f"{name:<11} {st['median']:8.3f} s/step median (min {st['min']:.3f}, max {st['max']:.3f})  "
-              f"free taxis {res['free_taxis']}  peak RSS {res['peak_rss_mb']:.0f} MB  first call {res['first_call_seconds']:.2f} s", flush=True)
+        print(f"{name}: free taxis {res['free_taxis']}, critical path {res['critical_path']} waves, peak RSS {res['peak_rss_mb']:.0f} MB, "
+              f"first call {res['first_call_seconds']:.2f} s", flush=True)
+        for v, rec in res["variants"].items():
+            st = rec["plan_seconds_per_step"]
+            per_free = statistics.median(rec["seconds_per_free_taxi"]) * 1e3
+            same = "same decisions" if rec["hashes"] == res["hashes"] else "DIFFERENT decisions"
+            print(f"  {v:<16} {st['median']:8.3f} s/step median (min {st['min']:.3f}, max {st['max']:.3f})  "
+                  f"{per_free:6.2f} ms per free taxi  cpu {rec['cpu_seconds_per_step']['median']:.3f} s  "
+                  f"settled {statistics.mean(rec['settled_share']):5.1%} of decisions, "
+                  f"{statistics.mean(rec['shadow_share']):5.1%} of candidate samples  {same}", flush=True)
     pol = out["policies"]
     if "surge" in pol and "garces2023" in pol:
         ratio = pol["garces2023"]["plan_seconds_per_step"]["median"] / pol["surge"]["plan_seconds_per_step"]["median"]
@@ -224,7 +293,7 @@ def bench_plan(args: argparse.Namespace) -> int:
         print(f"garces2023 / surge median time ratio: {ratio:.2f}")
     c = out["city"]
     print(f"{args.scenario}: {c['intersections']} intersections, {args.taxis} taxis, H={args.horizon}, {args.samples} samples, "
-          f"{args.date} {args.hour}:00 + {args.warmup} min, {os.cpu_count()} cpus")
+          f"{args.date} {args.hour}:00 + {args.warmup} min, {os.cpu_count()} cpus, {args.workers} planning worker(s)")
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
     return 0
