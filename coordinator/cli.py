@@ -56,12 +56,14 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate", help="replay city-hours under several policies and compare them")
     _scenario_args(p)
     p.add_argument("--date", type=_date, default="2022-11-17", help="evaluation date (default: the paper's 2022-11-17)")
+    p.add_argument("--dates", type=_date, nargs="+", default=None, help="several evaluation dates (instead of --date)")
     p.add_argument("--hours", type=_hour, nargs="+", default=[15, 17, 19, 21])
     p.add_argument("--seeds", type=_positive, default=25, help="initial states 0..N-1")
     p.add_argument("--taxis", type=_positive, default=100)
     p.add_argument("--minutes", type=_positive, default=60, help="episode length N in minutes")
     p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"],
-                   help="registry names, each optionally with options: surge:forecast=true-rate,samples=500")
+                   help="registry names, each optionally with options: surge:forecast=true-rate,samples=500 "
+                        "(oracle and oracle-auction always run)")
     p.add_argument("--forecast", default=None,
                    help="forecast provider for surge (true-rate, previous-hour, model); garces2023 keeps previous-hour")
     p.add_argument("--model", default=None, help="trained predictor directory for surge's --forecast model")
@@ -110,7 +112,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     cfg = EvalConfig(
         scenario=args.scenario,
         data_dir=args.data,
-        date=args.date,
+        dates=args.dates or [args.date],
         hours=args.hours,
         seeds=args.seeds,
         taxis=args.taxis,
@@ -129,12 +131,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def print_results(doc: dict, *, policy: str | None = None, plot_path: str | None = None) -> dict:
     """The summary table, the paired comparison of ``policy`` (default: the first surge label) and the plot."""
-    from coordinator.evaluate import compare, format_comparison, format_table, parse_policy, plot, summarize
+    from coordinator.analysis import compare, format_comparison, format_table, oracle_exceptions, plot, summarize
+    from coordinator.evaluate import parse_policy
 
     cfg, c = doc["config"], doc["city"]
     seeds = sorted({e["seed"] for e in doc["episodes"]})
     print(f"{doc['scenario']}: {c['intersections']} intersections, {c['streets']} streets, {c['sectors']} sectors; "
-          f"{cfg['taxis']} taxis, {cfg['minutes']} min, {len(seeds)} seeds, date {cfg['date']}")
+          f"{cfg['taxis']} taxis, {cfg['minutes']} min, {len(seeds)} seeds, dates {' '.join(cfg['dates'])}; "
+          f"wait overhead measured against {doc['reference_oracle']}")
     summary = summarize(doc)
     print(format_table(summary))
     labels = list(dict.fromkeys(e["policy"] for e in doc["episodes"]))
@@ -143,8 +147,12 @@ def print_results(doc: dict, *, policy: str | None = None, plot_path: str | None
     if comparison:
         print()
         print(format_comparison(comparison))
+    n, below = oracle_exceptions(doc)
+    print(f"\n{doc['reference_oracle']} had the lowest total cost in {n - len({(e['date'], e['hour'], e['seed']) for e in below})} of {n} instances")
+    for e in below:
+        print(f"  exception: {e['date']} {e['hour']}h seed {e['seed']}: {e['policy']} {e['total_cost']} < {e['oracle_cost']}")
     if plot_path:
-        plot(summary, plot_path, title=f"{doc['scenario']} {cfg['date']}, {cfg['taxis']} taxis, {len(seeds)} seeds")
+        plot(summary, plot_path, title=f"{doc['scenario']} {', '.join(cfg['dates'])}, {cfg['taxis']} taxis, {len(seeds)} seeds")
         print(f"wrote {plot_path}")
     return {"summary": summary, "comparison": comparison}
 
@@ -162,7 +170,8 @@ def add_report(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from coordinator.evaluate import complete_seeds, read_results
+    from coordinator.analysis import complete_seeds
+    from coordinator.evaluate import read_results
 
     path = Path(args.results)
     doc = read_results(path)

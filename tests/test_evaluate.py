@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from city.errors import ConfigError, DataError
-from coordinator.evaluate import EvalConfig, compare, complete_seeds, evaluate, format_comparison, parse_policy, read_results, summarize
+from coordinator.analysis import bootstrap_ci, compare, complete_seeds, format_comparison, oracle_exceptions, summarize
+from coordinator.evaluate import EvalConfig, evaluate, instance_seed, parse_policy, read_results, write_json
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +83,7 @@ def test_resume_keeps_finished_instances(small_run: dict, tmp_path: Path) -> Non
 
 
 def test_complete_seeds_drops_a_seed_missing_an_hour(small_run: dict) -> None:
-    extra = {**small_run["episodes"][0], "hour": 21, "seed": 0}
+    extra = {**small_run["episodes"][0], "hour": 21, "seed": 0}  # seed 0 is now at every hour, seed 1 at 19 h only
     doc = {**small_run, "episodes": small_run["episodes"] + [extra]}
     assert complete_seeds(doc)["episodes"] == [e for e in doc["episodes"] if e["seed"] == 0]
     assert complete_seeds(small_run)["episodes"] == small_run["episodes"]
@@ -90,7 +91,7 @@ def test_complete_seeds_drops_a_seed_missing_an_hour(small_run: dict) -> None:
 
 def test_compare_pairs_instances(small_run: dict) -> None:
     rows = compare(small_run, "ia")
-    assert [(r["against"], r["hour"], r["n"]) for r in rows] == [("greedy", 19, 2)]  # never against the oracle
+    assert [(r["against"], r["hour"], r["n"]) for r in rows] == [("greedy", 19, 2)]  # never against an oracle
     ia = [e for e in small_run["episodes"] if e["policy"] == "ia"]
     greedy = [e for e in small_run["episodes"] if e["policy"] == "greedy"]
     row = rows[0]
@@ -101,6 +102,9 @@ def test_compare_pairs_instances(small_run: dict) -> None:
     served = [np.mean([e["served"] for e in side]) for side in (ia, greedy)]
     assert row["served_change"] == pytest.approx(served[0] / served[1] - 1)
     assert row["below_oracle"] == sum(e["total_cost"] < e["oracle_cost"] for e in ia)
+    diffs = [a["total_cost"] - b["total_cost"] for a, b in zip(ia, greedy)]
+    assert row["ci95"] == list(bootstrap_ci(np.array(diffs)))
+    assert row["ci95"][0] <= row["cost_difference"] <= row["ci95"][1]
     text = format_comparison(rows)
     assert "ia paired with each policy" in text and f"{row['wins']:>5} / 2" in text
     with pytest.raises(ConfigError, match="'surge' is not in the results"):
@@ -117,3 +121,49 @@ def test_read_results_names_the_broken_episode(small_run: dict, tmp_path: Path) 
     path.write_text("{")
     with pytest.raises(DataError, match="not JSON"):
         read_results(path)
+
+
+def test_both_oracles_run_and_the_oracle_is_cheapest(small_run: dict) -> None:
+    assert small_run["reference_oracle"] == "oracle"
+    for e in small_run["episodes"]:
+        assert e["oracle_cost"] <= e["oracle_auction_cost"]
+    n, below = oracle_exceptions(small_run)
+    assert n == 2 and below == []
+    rows = {r["policy"]: r for r in summarize(small_run)}
+    assert rows["ia"]["gap_closed_auction"] is not None and rows["ia"]["gap_closed_auction"] >= rows["ia"]["gap_closed"]
+
+
+def test_old_results_read_with_their_oracle_renamed(small_run: dict, tmp_path: Path) -> None:
+    """A file from before the route planner: its 'oracle' was the auction, and it reads as oracle-auction."""
+    old = json.loads(json.dumps(small_run))
+    del old["reference_oracle"]
+    cfg = old["config"]
+    cfg["date"] = cfg.pop("dates")[0]
+    for e in old["episodes"]:
+        del e["date"], e["oracle_auction_cost"]
+    old["episodes"][0]["policy"] = "oracle"
+    path = tmp_path / "old.json"
+    write_json(old, path)
+    doc = read_results(path)
+    assert doc["reference_oracle"] == "oracle-auction" and doc["config"]["dates"] == ["2022-11-17"]
+    assert doc["episodes"][0]["policy"] == "oracle-auction"
+    assert "oracle" not in doc["config"]["policies"] and "oracle-auction" in doc["config"]["policies"]
+    assert all(e["date"] == "2022-11-17" and e["oracle_auction_cost"] == e["oracle_cost"] for e in doc["episodes"])
+    with pytest.raises(DataError, match="'oracle' was the auction"):
+        evaluate(EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"]),
+                 progress=lambda _msg: None, checkpoint=path, resume=True)
+
+
+def test_instances_draw_their_own_rollout_seed() -> None:
+    seeds = {instance_seed(d, h, s) for d in ("2022-11-17", "2022-10-06") for h in (17, 19) for s in range(5)}
+    assert len(seeds) == 20
+    assert instance_seed("2022-11-17", 19, 3) == instance_seed("2022-11-17", 19, 3)
+
+
+def test_several_dates_pair_by_instance() -> None:
+    cfg = EvalConfig(dates=["2022-11-17", "2022-10-06"], hours=[19], seeds=1, taxis=20, minutes=10, policies=["greedy", "ia"])
+    doc = evaluate(cfg, progress=lambda _msg: None)
+    assert [(e["date"], e["policy"]) for e in doc["episodes"]] == [
+        ("2022-11-17", "greedy"), ("2022-11-17", "ia"), ("2022-10-06", "greedy"), ("2022-10-06", "ia")]
+    (row,) = compare(doc, "ia")
+    assert row["n"] == 2 and row["dates"] == 2
