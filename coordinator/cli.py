@@ -297,9 +297,11 @@ def build_parser() -> argparse.ArgumentParser:
     add_demo(sub)
     from coordinator.bench import add_parser as add_bench
     from coordinator.fleet import add_parsers as add_fleet
+    from coordinator.reproduce import add_parser as add_reproduce
 
     add_bench(sub)
     add_fleet(sub)
+    add_reproduce(sub)
     try:
         from predictor.cli import add_parser as add_predictor
     except ImportError:

@@ -62,7 +62,7 @@ class EvalConfig:
 
 
 def parse_policy(spec: str) -> tuple[str, dict]:
-    """``"name:key=value,key=value"`` → ``(name, options)``; numbers become int or float."""
+    """``"name:key=value,key=value"`` → ``(name, options)``; numbers become int or float, ``none`` None."""
     name, _, rest = spec.partition(":")
     options: dict = {}
     for item in filter(None, rest.split(",")):
@@ -74,6 +74,8 @@ def parse_policy(spec: str) -> tuple[str, dict]:
 
 
 def _option_value(raw: str):
+    if raw.lower() == "none":
+        return None
     for conv in (int, float):
         try:
             return conv(raw)
