@@ -267,23 +267,33 @@ def _demand_plot(rows: list[dict], args: argparse.Namespace) -> None:
 
 # ------------------------------------------------------------------------- demo
 def add_demo(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="the local multi-process fleet at the 7 pm surge on the embedded synthetic city, "
-                                     "checked decision for decision against the in-process run")
-    p.add_argument("--taxis", type=_positive, default=10, help="taxis, one agent process each")
+    p = sub.add_parser("demo", help="the local multi-process fleet at the 5 pm event surge on the embedded synthetic city, "
+                                     "checked decision for decision against the in-process run, then surge against greedy")
+    p.add_argument("--taxis", type=_positive, default=40, help="taxis, one agent process each (about 215 MB each)")
     p.add_argument("--minutes", type=_positive, default=30)
-    p.add_argument("--json", default=None, help="write the run's result here")
+    p.add_argument("--hour", type=_hour, default=17, help="episode hour (default: the 5 pm event surge)")
+    p.add_argument("--out", default="demo-out", help="directory for the run's JSON, the map and the GIF")
+    p.add_argument("--json", default=None, help="write the run's result here (default: OUT/demo.json)")
     p.set_defaults(func=cmd_demo)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from coordinator.fleet import cmd_fleet
+    from coordinator.demo import surge_vs_greedy
+    from coordinator.fleet import cmd_fleet, fleet_config
 
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = args.json or str(out / "demo.json")
     ns = argparse.Namespace(
-        run="demo", scenario="synthetic", data=None, date="2022-11-17", hour=19, minutes=args.minutes, taxis=args.taxis,
+        run="demo", scenario="synthetic", data=None, date="2022-11-17", hour=args.hour, minutes=args.minutes, taxis=args.taxis,
         seed=0, world_seed=0, policy="surge", forecast="true-rate", model=None, horizon=None, samples=None,
-        deadline=30.0, join_timeout=120.0, minute_seconds=0.0, predictor=False, json=args.json, check=True,
+        deadline=30.0, join_timeout=120.0, minute_seconds=0.0, predictor=False, json=path, check=True,
     )
-    return cmd_fleet(ns)
+    rc = cmd_fleet(ns)
+    print()
+    for line in surge_vs_greedy(fleet_config(ns), json.loads(Path(path).read_text()), out):
+        print(line)
+    return rc
 
 
 # ------------------------------------------------------------------------- main

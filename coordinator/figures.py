@@ -78,6 +78,7 @@ class Track:
     busy: np.ndarray  # (T, m) bool
     waiting: list[np.ndarray]  # request indices per minute
     cost: list[int]
+    served: int = 0
 
 
 def track(city: City, policy, requests: Requests, start: np.ndarray, context, label: str) -> Track:
@@ -93,7 +94,7 @@ def track(city: City, policy, requests: Requests, start: np.ndarray, context, la
         busy.append(obs.tau > 0)
         waiting.append(obs.req_index.copy())
         cost.append(sim.step(policy.act(obs)))
-    return Track(label, np.array(pos), np.array(busy), waiting, cost)
+    return Track(label, np.array(pos), np.array(busy), waiting, cost, int((sim.state.picked_at >= 0).sum()))
 
 
 def surge_gif(city: City, requests: Requests, tracks: list[Track], path: str | Path, title: str) -> None:
