@@ -13,14 +13,18 @@ from coordinator.analysis import bootstrap_ci, compare, complete_seeds, format_c
 from coordinator.evaluate import EvalConfig, evaluate, instance_seed, parse_policy, read_results, write_json
 
 
+#: The route-planning oracle with a short search: these tests are about the harness, not the planner.
+FAST = {"oracle": {"iters": 200}}
+
+
 @pytest.fixture(scope="module")
 def small_run() -> dict:
-    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"])
+    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
     return evaluate(cfg, progress=lambda _msg: None)
 
 
 def test_same_seed_same_decisions(small_run: dict) -> None:
-    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"])
+    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
     again = evaluate(cfg, progress=lambda _msg: None)
     assert [e["decisions_sha256"] for e in again["episodes"]] == [e["decisions_sha256"] for e in small_run["episodes"]]
     assert [e["total_cost"] for e in again["episodes"]] == [e["total_cost"] for e in small_run["episodes"]]
@@ -32,7 +36,7 @@ def test_different_seeds_differ(small_run: dict) -> None:
 
 
 def test_parallel_workers_give_the_same_results(small_run: dict) -> None:
-    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], jobs=2)
+    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST, jobs=2)
     par = evaluate(cfg, progress=lambda _msg: None)
     assert [e["decisions_sha256"] for e in par["episodes"]] == [e["decisions_sha256"] for e in small_run["episodes"]]
 
@@ -67,17 +71,17 @@ def test_policy_specs_carry_options() -> None:
 
 def test_resume_keeps_finished_instances(small_run: dict, tmp_path: Path) -> None:
     path = tmp_path / "r.json"
-    one = EvalConfig(hours=[19], seeds=1, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"])
+    one = EvalConfig(hours=[19], seeds=1, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
     evaluate(one, progress=lambda _msg: None, checkpoint=path)
     first = json.loads(path.read_text())["episodes"]
     assert len(first) == 3
     msgs: list[str] = []
-    two = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"])
+    two = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
     doc = evaluate(two, progress=msgs.append, checkpoint=path, resume=True)
     assert msgs[0].startswith("resuming") and "[1/1]" in msgs[1] and len(msgs) == 2  # only seed 1 ran
     assert doc["episodes"][:3] == first
     assert [e["decisions_sha256"] for e in doc["episodes"]] == [e["decisions_sha256"] for e in small_run["episodes"]]
-    other = EvalConfig(hours=[19], seeds=2, taxis=30, minutes=20, policies=["greedy", "ia", "oracle"])
+    other = EvalConfig(hours=[19], seeds=2, taxis=30, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
     with pytest.raises(DataError, match="taxis=40"):
         evaluate(other, progress=lambda _msg: None, checkpoint=path, resume=True)
 
@@ -150,7 +154,7 @@ def test_old_results_read_with_their_oracle_renamed(small_run: dict, tmp_path: P
     assert "oracle" not in doc["config"]["policies"] and "oracle-auction" in doc["config"]["policies"]
     assert all(e["date"] == "2022-11-17" and e["oracle_auction_cost"] == e["oracle_cost"] for e in doc["episodes"])
     with pytest.raises(DataError, match="'oracle' was the auction"):
-        evaluate(EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"]),
+        evaluate(EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST),
                  progress=lambda _msg: None, checkpoint=path, resume=True)
 
 
@@ -161,7 +165,7 @@ def test_instances_draw_their_own_rollout_seed() -> None:
 
 
 def test_several_dates_pair_by_instance() -> None:
-    cfg = EvalConfig(dates=["2022-11-17", "2022-10-06"], hours=[19], seeds=1, taxis=20, minutes=10, policies=["greedy", "ia"])
+    cfg = EvalConfig(dates=["2022-11-17", "2022-10-06"], hours=[19], seeds=1, taxis=20, minutes=10, policies=["greedy", "ia"], policy_options=FAST)
     doc = evaluate(cfg, progress=lambda _msg: None)
     assert [(e["date"], e["policy"]) for e in doc["episodes"]] == [
         ("2022-11-17", "greedy"), ("2022-11-17", "ia"), ("2022-10-06", "greedy"), ("2022-10-06", "ia")]
