@@ -102,7 +102,7 @@ def surge_gif(city: City, requests: Requests, tracks: list[Track], path: str | P
     plt = _plt()
     from matplotlib.animation import FuncAnimation, PillowWriter
 
-    fig, axes = plt.subplots(1, len(tracks), figsize=_size(city, len(tracks), extra=0.6), dpi=72)
+    fig, axes = plt.subplots(1, len(tracks), figsize=_size(city, len(tracks), extra=0.6), dpi=90)
     axes = np.atleast_1d(axes)
     artists = []
     for ax, tr in zip(axes, tracks):
@@ -120,7 +120,7 @@ def surge_gif(city: City, requests: Requests, tracks: list[Track], path: str | P
             req.set_offsets(city.xy[requests.pickup[w]] if w.size else np.empty((0, 2)))
             taxi.set_offsets(city.xy[tr.pos[t]])
             taxi.set_color(np.where(tr.busy[t], "#7f7f7f", "#2ca02c"))
-            ax.set_title(f"{tr.label}: minute {t}\nwaiting {w.size}, cost so far {sum(tr.cost[:t + 1])}", fontsize=9)
+            ax.set_title(f"{tr.label}: minute {t}\nwaiting {w.size}, cost so far {sum(tr.cost[:t + 1])}", fontsize=8)
             out += [req, taxi]
         return out
 
