@@ -141,6 +141,7 @@ _LAZY: dict[str, str] = {
     "greedy": "agents.greedy",
     "ia": "agents.ia",
     "oracle": "agents.oracle",
+    "oracle-auction": "agents.oracle",
     "surge": "agents.rollout",
     "garces2023": "agents.rollout",
 }

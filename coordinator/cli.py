@@ -25,12 +25,14 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate", help="replay city-hours under several policies and compare them")
     scenario_args(p)
     p.add_argument("--date", type=iso_date, default="2022-11-17", help="evaluation date (default: the paper's 2022-11-17)")
+    p.add_argument("--dates", type=iso_date, nargs="+", default=None, help="several evaluation dates (instead of --date)")
     p.add_argument("--hours", type=hour, nargs="+", default=[15, 17, 19, 21])
     p.add_argument("--seeds", type=positive, default=25, help="initial states 0..N-1")
     p.add_argument("--taxis", type=positive, default=100)
     p.add_argument("--minutes", type=positive, default=60, help="episode length N in minutes")
     p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"],
-                   help="registry names, each optionally with options: surge:forecast=true-rate,samples=500")
+                   help="registry names, each optionally with options: surge:forecast=true-rate,samples=500 "
+                        "(oracle and oracle-auction always run)")
     p.add_argument("--forecast", default=None,
                    help="forecast provider for surge (true-rate, previous-hour, model); garces2023 keeps previous-hour")
     p.add_argument("--model", default=None, help="trained predictor directory for surge's --forecast model")
@@ -62,7 +64,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     cfg = EvalConfig(
         scenario=args.scenario,
         data_dir=args.data,
-        date=args.date,
+        dates=args.dates or [args.date],
         hours=args.hours,
         seeds=args.seeds,
         taxis=args.taxis,
@@ -83,12 +85,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def print_results(doc: dict, *, policy: str | None = None, plot_path: str | None = None) -> dict:
     """The summary table, the paired comparison of ``policy`` (default: the first surge label) and the plot."""
     from agents.base import split_policy
-    from coordinator.evaluate import compare, format_comparison, format_table, plot, summarize
+    from coordinator.analysis import compare, format_comparison, format_table, oracle_exceptions, plot, summarize
 
     cfg, c = doc["config"], doc["city"]
     seeds = sorted({e["seed"] for e in doc["episodes"]})
     print(f"{doc['scenario']}: {c['intersections']} intersections, {c['streets']} streets, {c['sectors']} sectors; "
-          f"{cfg['taxis']} taxis, {cfg['minutes']} min, {len(seeds)} seeds, date {cfg['date']}")
+          f"{cfg['taxis']} taxis, {cfg['minutes']} min, {len(seeds)} seeds, dates {' '.join(cfg['dates'])}; "
+          f"wait overhead measured against {doc['reference_oracle']}")
     summary = summarize(doc)
     print(format_table(summary))
     labels = list(dict.fromkeys(e["policy"] for e in doc["episodes"]))
@@ -97,8 +100,12 @@ def print_results(doc: dict, *, policy: str | None = None, plot_path: str | None
     if comparison:
         print()
         print(format_comparison(comparison))
+    n, below = oracle_exceptions(doc)
+    print(f"\n{doc['reference_oracle']} had the lowest total cost in {n - len({(e['date'], e['hour'], e['seed']) for e in below})} of {n} instances")
+    for e in below:
+        print(f"  exception: {e['date']} {e['hour']}h seed {e['seed']}: {e['policy']} {e['total_cost']} < {e['oracle_cost']}")
     if plot_path:
-        plot(summary, plot_path, title=f"{doc['scenario']} {cfg['date']}, {cfg['taxis']} taxis, {len(seeds)} seeds")
+        plot(summary, plot_path, title=f"{doc['scenario']} {', '.join(cfg['dates'])}, {cfg['taxis']} taxis, {len(seeds)} seeds")
         print(f"wrote {plot_path}")
     return {"summary": summary, "comparison": comparison}
 
@@ -116,7 +123,8 @@ def add_report(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from coordinator.evaluate import complete_seeds, read_results
+    from coordinator.analysis import complete_seeds
+    from coordinator.evaluate import read_results
 
     path = Path(args.results)
     doc = read_results(path)
@@ -212,25 +220,35 @@ def _demand_plot(rows: list[dict], args: argparse.Namespace) -> None:
 
 # ------------------------------------------------------------------------- demo
 def add_demo(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="the local multi-process fleet at the 7 pm surge on the embedded synthetic city, "
-                                     "checked decision for decision against the in-process run")
-    p.add_argument("--taxis", type=positive, default=10, help="taxis, one agent process each")
+    p = sub.add_parser("demo", help="the local multi-process fleet at the 5 pm event surge on the embedded synthetic city, "
+                                     "checked decision for decision against the in-process run, then surge against greedy")
+    p.add_argument("--taxis", type=positive, default=40, help="taxis, one agent process each (about 215 MB each)")
     p.add_argument("--minutes", type=positive, default=30)
-    p.add_argument("--json", default=None, help="write the run's result here")
+    p.add_argument("--hour", type=hour, default=17, help="episode hour (default: the 5 pm event surge)")
+    p.add_argument("--out", default="demo-out", help="directory for the run's JSON, the map and the GIF")
+    p.add_argument("--json", default=None, help="write the run's result here (default: OUT/demo.json)")
     p.add_argument("--insecure", action="store_true", help="run the bus without TLS or access control")
     p.set_defaults(func=cmd_demo)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from coordinator.fleet import cmd_fleet
+    from coordinator.demo import surge_vs_greedy
+    from coordinator.fleet import cmd_fleet, fleet_config
 
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = args.json or str(out / "demo.json")
     ns = argparse.Namespace(
-        run="demo", scenario="synthetic", data=None, date="2022-11-17", hour=19, minutes=args.minutes, taxis=args.taxis,
+        run="demo", scenario="synthetic", data=None, date="2022-11-17", hour=args.hour, minutes=args.minutes, taxis=args.taxis,
         seed=0, world_seed=0, policy="surge", forecast="true-rate", model=None, horizon=None, samples=None,
-        deadline=30.0, join_timeout=120.0, minute_seconds=0.0, predictor=False, json=args.json, check=True,
+        deadline=30.0, join_timeout=120.0, minute_seconds=0.0, predictor=False, json=path, check=True,
         certs=None, insecure=args.insecure,
     )
-    return cmd_fleet(ns)
+    rc = cmd_fleet(ns)
+    print()
+    for line in surge_vs_greedy(fleet_config(ns), json.loads(Path(path).read_text()), out):
+        print(line)
+    return rc
 
 
 # ------------------------------------------------------------------------- main
@@ -244,9 +262,11 @@ def build_parser() -> argparse.ArgumentParser:
     add_demo(sub)
     from coordinator.bench import add_parser as add_bench
     from coordinator.fleet import add_parsers as add_fleet
+    from coordinator.reproduce import add_parser as add_reproduce
 
     add_bench(sub)
     add_fleet(sub)
+    add_reproduce(sub)
     try:
         from predictor.cli import add_parser as add_predictor
     except ImportError:

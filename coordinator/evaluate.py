@@ -2,8 +2,17 @@
 
 One instance is (date, hour, seed): the requests come from the demand world
 for that date and hour, and the seed draws the fleet's initial placement.
-Every policy runs on the same instances, and the oracle always runs too,
-because wait overhead per served request is measured against it.
+The rollout policies' random seed (and with it ``garces2023``'s
+certainty-equivalence pools) is derived from the instance too
+(:func:`instance_seed`), unless a policy spec fixes ``seed``.  Every policy
+runs on the same instances, and both oracles always run too: wait overhead
+per served request is measured against ``oracle`` (the reference oracle), and
+the gap closed is reported against ``oracle`` and ``oracle-auction``.
+
+Results files written before ``oracle`` became the route planner (they have
+no ``reference_oracle`` field) are read with their ``oracle`` rows renamed
+``oracle-auction``, which is what they ran; their wait overheads are then
+measured against the auction, and the document says so.
 
 A policy is named as in the registry, optionally with options:
 ``surge:forecast=true-rate,samples=500``; the whole string labels its rows,
@@ -16,22 +25,25 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import hashlib
 import json
 import signal
 import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Iterable, Iterator
+import inspect
+from typing import Callable, Iterator
 
 import numpy as np
 
 from agents.base import EpisodeContext, Policy, make_policy, parse_policy
-from city.errors import ConfigError, DataError
+from city.errors import DataError
 from city.graph import City
 from city.sim import EpisodeResult, FleetSim, Requests
 
 RESULTS_SCHEMA = "surge.results/1"
+ORACLES = ("oracle", "oracle-auction")
 METRICS = ("total_cost", "outstanding_end", "served", "wait_overhead_per_served", "plan_seconds_per_step")
 
 
@@ -39,7 +51,7 @@ METRICS = ("total_cost", "outstanding_end", "served", "wait_overhead_per_served"
 class EvalConfig:
     scenario: str = "synthetic"
     data_dir: str | None = None
-    date: str = "2022-11-17"
+    dates: list[str] = field(default_factory=lambda: ["2022-11-17"])
     hours: list[int] = field(default_factory=lambda: [15, 17, 19, 21])
     seeds: int = 25
     taxis: int = 100
@@ -49,6 +61,18 @@ class EvalConfig:
     world_seed: int = 0
     jobs: int = 1
     cluster: str | None = None
+
+
+def instance_seed(date: str | dt.date, hour: int, seed: int) -> int:
+    """A 31-bit seed of the instance (date, hour, seed), so that instances draw independent random numbers."""
+    text = f"{dt.date.fromisoformat(str(date)).isoformat()}|{int(hour)}|{int(seed)}"
+    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:4], "little") & 0x7FFFFFFF
+
+
+def _takes_rollout_seed(name: str) -> bool:
+    from agents.base import policy_class
+
+    return "seed" in inspect.signature(getattr(policy_class(name), "rollout_config", lambda: None)).parameters
 
 
 def initial_positions(city: City, n_taxis: int, seed: int) -> np.ndarray:
@@ -92,18 +116,21 @@ def run_episode(
     return sim.result(costs, controls, plan)
 
 
-def _instance(cfg: EvalConfig, hour: int, seed: int) -> list[dict]:
-    """All policies (and the oracle) on one instance; rows for the requested policies."""
+def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int) -> list[dict]:
+    """All policies (and both oracles) on one instance; rows for the requested policies."""
     scen = _scenario_cache(cfg)
-    date = dt.date.fromisoformat(cfg.date)
+    date = dt.date.fromisoformat(date_text)
     requests = episode_requests(scen.world, date, hour, cfg.minutes)
     start = initial_positions(scen.city, cfg.taxis, seed)
     context = EpisodeContext(city=scen.city, date=date, hour=hour, minutes=cfg.minutes, seed=seed, world=scen.world)
-    labels = list(dict.fromkeys(cfg.policies + ["oracle"]))
+    labels = list(dict.fromkeys(cfg.policies + list(ORACLES)))
     results: dict[str, EpisodeResult] = {}
     for label in labels:
         name, options = parse_policy(label)
-        policy = make_policy(name, scen.city, **{**cfg.policy_options.get(label, {}), **options})
+        options = {**cfg.policy_options.get(label, {}), **options}
+        if "seed" not in options and _takes_rollout_seed(name):
+            options["seed"] = instance_seed(date, hour, seed)
+        policy = make_policy(name, scen.city, **options)
         results[label] = run_episode(scen.city, policy, requests, start, context)
     oracle_cost = results["oracle"].total_cost
     greedy_cost = results["greedy"].total_cost if "greedy" in results else None
@@ -112,6 +139,7 @@ def _instance(cfg: EvalConfig, hour: int, seed: int) -> list[dict]:
         r = results[name]
         rows.append(
             {
+                "date": date_text,
                 "hour": hour,
                 "seed": seed,
                 "policy": name,
@@ -121,6 +149,7 @@ def _instance(cfg: EvalConfig, hour: int, seed: int) -> list[dict]:
                 "requests": r.n_requests,
                 "wait_overhead_per_served": (r.total_cost - oracle_cost) / max(r.served, 1),
                 "oracle_cost": oracle_cost,
+                "oracle_auction_cost": results["oracle-auction"].total_cost,
                 "greedy_cost": greedy_cost,
                 "plan_seconds_per_step": float(np.mean(r.plan_seconds)),
                 "decisions_sha256": r.decisions_sha256,
@@ -129,7 +158,7 @@ def _instance(cfg: EvalConfig, hour: int, seed: int) -> list[dict]:
     return rows
 
 
-def _instance_task(task: tuple[EvalConfig, int, int]) -> list[dict]:
+def _instance_task(task: tuple[EvalConfig, str, int, int]) -> list[dict]:
     return _instance(*task)
 
 
@@ -151,8 +180,18 @@ _RESUME_FREE = ("seeds", "jobs", "cluster")
 _EPISODE_FIELDS = ("hour", "seed", "policy", "oracle_cost", *METRICS)
 
 
+def _key(e: dict) -> tuple[str, int, int]:
+    return (e["date"], e["hour"], e["seed"])
+
+
 def read_results(path: str | Path) -> dict:
-    """A ``surge.results/1`` document, checked down to every episode's fields."""
+    """A ``surge.results/1`` document, checked down to every episode's fields, in the current layout.
+
+    Older documents are brought up to date: one ``date`` becomes ``dates``,
+    episodes get their date, and a document without ``reference_oracle``
+    (written when ``oracle`` was the auction) has its ``oracle`` rows renamed
+    ``oracle-auction`` and ``reference_oracle: "oracle-auction"``.
+    """
     path = Path(path)
     try:
         doc = json.loads(path.read_text())
@@ -168,7 +207,22 @@ def read_results(path: str | Path) -> dict:
         missing = [f for f in _EPISODE_FIELDS if not isinstance(ep, dict) or f not in ep]
         if missing:
             raise DataError(f"episode {k} has no {missing[0]!r} field", path=path)
-    return doc
+    return upgrade(doc)
+
+
+def upgrade(doc: dict) -> dict:
+    """``doc`` in the current layout (see :func:`read_results`); a current document is returned as it is."""
+    cfg = dict(doc["config"])
+    if "dates" not in cfg:
+        cfg["dates"] = [cfg.pop("date", "2022-11-17")]
+    episodes = [{"date": cfg["dates"][0], **e} for e in doc["episodes"]]
+    out = {**doc, "config": cfg, "episodes": episodes}
+    if "reference_oracle" not in doc:
+        rename = {"oracle": "oracle-auction"}
+        cfg["policies"] = [rename.get(p, p) for p in cfg.get("policies", [])]
+        out["episodes"] = [{**e, "policy": rename.get(e["policy"], e["policy"]), "oracle_auction_cost": e["oracle_cost"]} for e in episodes]
+        out["reference_oracle"] = "oracle-auction"
+    return out
 
 
 def load_finished(cfg: EvalConfig, path: str | Path) -> list[dict]:
@@ -176,6 +230,8 @@ def load_finished(cfg: EvalConfig, path: str | Path) -> list[dict]:
     doc = read_results(path)
     mine = {k: v for k, v in asdict(cfg).items() if k not in _RESUME_FREE}
     theirs = {k: v for k, v in doc.get("config", {}).items() if k not in _RESUME_FREE}
+    if doc.get("reference_oracle") != "oracle":
+        raise DataError("was written when 'oracle' was the auction; use another --json", path=path)
     for key in mine:
         if mine[key] != theirs.get(key):
             raise DataError(f"was written with {key}={theirs.get(key)!r}, this run has {mine[key]!r}; use another --json", path=path)
@@ -201,24 +257,26 @@ def evaluate(
         name, options = parse_policy(label)
         make_policy(name, scen.city, **{**cfg.policy_options.get(label, {}), **options})
     episodes: list[dict] = []
+    grid = [(d, h, s) for d in cfg.dates for h in cfg.hours for s in range(cfg.seeds)]
     if resume and checkpoint is not None and Path(checkpoint).exists():
-        wanted = {(h, s) for h in cfg.hours for s in range(cfg.seeds)}
-        episodes = [e for e in load_finished(cfg, checkpoint) if (e["hour"], e["seed"]) in wanted]
+        wanted = set(grid)
+        episodes = [e for e in load_finished(cfg, checkpoint) if _key(e) in wanted]
         if episodes:
-            progress(f"resuming from {checkpoint}: {len({(e['hour'], e['seed']) for e in episodes})} instances done")
-    done = {(e["hour"], e["seed"]) for e in episodes}
-    # Seed by seed across the hours, so that a run cut short has every hour at the same depth.
-    tasks = [(h, s) for s in range(cfg.seeds) for h in cfg.hours if (h, s) not in done]
+            progress(f"resuming from {checkpoint}: {len({_key(e) for e in episodes})} instances done")
+    done = {_key(e) for e in episodes}
+    # Seed by seed across the dates and hours, so that a run cut short has every hour at the same depth.
+    tasks = [(d, h, s) for s in range(cfg.seeds) for d in cfg.dates for h in cfg.hours if (d, h, s) not in done]
     t0 = time.perf_counter()
 
     def document() -> dict:
-        order = {(h, s): k for k, (h, s) in enumerate((h, s) for h in cfg.hours for s in range(cfg.seeds))}
+        order = {k: i for i, k in enumerate(grid)}
         return {
             "schema": RESULTS_SCHEMA,
             "scenario": cfg.scenario,
+            "reference_oracle": "oracle",
             "city": scen.city.summary(),
             "config": asdict(cfg),
-            "episodes": sorted(episodes, key=lambda e: order[(e["hour"], e["seed"])]),
+            "episodes": sorted(episodes, key=lambda e: order[_key(e)]),
         }
 
     def report(k: int, rows: list[dict]) -> None:
@@ -227,7 +285,7 @@ def evaluate(
             write_json(document(), checkpoint)
         head = rows[0]
         costs = " ".join(f"{r['policy']}={r['total_cost']}" for r in rows)
-        progress(f"[{k}/{len(tasks)}] hour {head['hour']} seed {head['seed']}: {costs} ({time.perf_counter() - t0:.1f} s)")
+        progress(f"[{k}/{len(tasks)}] {head['date']} hour {head['hour']} seed {head['seed']}: {costs} ({time.perf_counter() - t0:.1f} s)")
 
     with contextlib.closing(run_instances(cfg, tasks)) as results:  # closed at once on any error: workers stop
         for k, rows in enumerate(results, 1):
@@ -235,10 +293,10 @@ def evaluate(
     return document()
 
 
-def run_instances(cfg: EvalConfig, tasks: list[tuple[int, int]]) -> Iterator[list[dict]]:
-    """The rows of each ``(hour, seed)`` instance, in task order: in this process, in a pool of
+def run_instances(cfg: EvalConfig, tasks: list[tuple[str, int, int]]) -> Iterator[list[dict]]:
+    """The rows of each ``(date, hour, seed)`` instance, in task order: in this process, in a pool of
     ``cfg.jobs`` worker processes, or on the Dask cluster at ``cfg.cluster``."""
-    work = [(cfg, h, s) for h, s in tasks]
+    work = [(cfg, *t) for t in tasks]
     if cfg.cluster:
         from coordinator.cluster import run_on_cluster
 
@@ -257,155 +315,6 @@ def run_instances(cfg: EvalConfig, tasks: list[tuple[int, int]]) -> Iterator[lis
             yield from pool.imap(_instance_task, work)
     else:
         yield from map(_instance_task, work)
-
-
-def summarize(doc: dict) -> list[dict]:
-    """Mean and standard deviation of every metric per (hour, policy).
-
-    ``gap_closed`` is the share of the greedy→oracle gap in mean total cost
-    that the policy closes, (greedy - policy) / (greedy - oracle), where the
-    run included greedy (the paper's yardstick).
-    """
-    out = []
-    eps = doc["episodes"]
-    hours = sorted({e["hour"] for e in eps})
-    policies = list(dict.fromkeys(e["policy"] for e in eps))
-    for h in hours:
-        for p in policies:
-            sel = [e for e in eps if e["hour"] == h and e["policy"] == p]
-            if not sel:
-                continue
-            row = {"hour": h, "policy": p, "n": len(sel)}
-            for m in METRICS:
-                vals = np.array([e[m] for e in sel], dtype=float)
-                row[m] = (float(vals.mean()), float(vals.std()))
-            row["gap_closed"] = None
-            if all(e.get("greedy_cost") is not None for e in sel):
-                greedy = np.mean([e["greedy_cost"] for e in sel])
-                gap = greedy - np.mean([e["oracle_cost"] for e in sel])
-                if gap > 0:
-                    row["gap_closed"] = float((greedy - row["total_cost"][0]) / gap)
-            out.append(row)
-    return out
-
-
-def complete_seeds(doc: dict) -> dict:
-    """The document restricted to seeds finished at every hour, so that hours compare like for like.
-
-    A run cut short (or still going) leaves its last seed at some hours only.
-    """
-    eps = doc["episodes"]
-    hours = {e["hour"] for e in eps}
-    at = {}
-    for e in eps:
-        at.setdefault(e["seed"], set()).add(e["hour"])
-    keep = {s for s, hs in at.items() if hs == hours}
-    return {**doc, "episodes": [e for e in eps if e["seed"] in keep]}
-
-
-def compare(doc: dict, policy: str) -> list[dict]:
-    """``policy`` against every other non-oracle policy, paired instance by instance, per hour.
-
-    ``wins`` counts the instances where ``policy`` has the lower total cost;
-    ``overhead_reduction`` is 1 - its mean wait overhead per served request
-    over the other's, and ``served_change`` its mean served over the other's,
-    minus 1 (the paper's two headline comparisons).  ``below_oracle`` counts
-    instances where ``policy`` beat the oracle, which is a receding-horizon
-    auction, not a proven optimum.
-    """
-    by = {(e["hour"], e["seed"], e["policy"]): e for e in doc["episodes"]}
-    policies = list(dict.fromkeys(e["policy"] for e in doc["episodes"]))
-    if policy not in policies:
-        raise ConfigError(f"policy {policy!r} is not in the results; they hold {', '.join(policies)}")
-    out = []
-    for other in (p for p in policies if p not in (policy, "oracle")):
-        for h in sorted({e["hour"] for e in doc["episodes"]}):
-            pairs = [(by[k], by[(k[0], k[1], other)]) for k in by
-                     if k[0] == h and k[2] == policy and (k[0], k[1], other) in by]
-            if not pairs:
-                continue
-            mine, theirs = (np.array([[a[m] for a in side] for m in METRICS[:4]]) for side in zip(*pairs))
-            out.append({
-                "hour": h,
-                "policy": policy,
-                "against": other,
-                "n": len(pairs),
-                "wins": int((mine[0] < theirs[0]).sum()),
-                "cost_difference": float((mine[0] - theirs[0]).mean()),
-                "overhead_reduction": float(1 - mine[3].mean() / theirs[3].mean()) if theirs[3].mean() > 0 else None,
-                "served_change": float(mine[2].mean() / theirs[2].mean() - 1),
-                "below_oracle": int(sum(a["total_cost"] < a["oracle_cost"] for a, _ in pairs)),
-            })
-    return out
-
-
-def format_comparison(rows: Iterable[dict]) -> str:
-    rows = list(rows)
-    if not rows:
-        return ""
-    width = max([10] + [len(r["against"]) + 2 for r in rows])
-    head = f"{'hour':>4}  {'against':<{width}}{'wins':>10}{'cost diff':>12}{'overhead Δ':>12}{'served Δ':>10}"
-    policy = rows[0]["policy"]
-    lines = [f"{policy} paired with each policy on the same instances (wins: lower total cost)", head, "-" * len(head)]
-    for r in rows:
-        red = f"{-100 * r['overhead_reduction']:>+11.1f}%" if r["overhead_reduction"] is not None else f"{'—':>12}"
-        lines.append(
-            f"{r['hour']:>4}  {r['against']:<{width}}{r['wins']:>5} / {r['n']:<3}"
-            f"{r['cost_difference']:>+11.1f}{red}{100 * r['served_change']:>+9.1f}%"
-        )
-    per_hour = {r["hour"]: r for r in rows}.values()
-    below, n = sum(r["below_oracle"] for r in per_hour), sum(r["n"] for r in per_hour)
-    lines.append(f"{policy} cost less than the oracle (a receding-horizon auction) in {below} of {n} instances")
-    return "\n".join(lines)
-
-
-def format_table(summary: Iterable[dict]) -> str:
-    summary = list(summary)
-    width = max([12] + [len(r["policy"]) + 2 for r in summary])
-    head = f"{'hour':>4}  {'policy':<{width}}{'total cost':>20}{'outstanding end':>18}{'served':>16}{'wait overhead/served':>22}{'plan ms/step':>14}{'gap closed':>12}"
-    lines = [head, "-" * len(head)]
-    for r in summary:
-        tc, oe, sv, wo, ps = (r[m] for m in METRICS)
-        lines.append(
-            f"{r['hour']:>4}  {r['policy']:<{width}}"
-            f"{tc[0]:>11.1f} ± {tc[1]:<6.1f}"
-            f"{oe[0]:>9.1f} ± {oe[1]:<6.1f}"
-            f"{sv[0]:>8.1f} ± {sv[1]:<5.1f}"
-            f"{wo[0]:>13.2f} ± {wo[1]:<6.2f}"
-            f"{ps[0] * 1e3:>12.2f}"
-            + (f"{100 * r['gap_closed']:>11.1f}%" if r.get("gap_closed") is not None else f"{'—':>12}")
-        )
-    return "\n".join(lines)
-
-
-def plot(summary: list[dict], path: str | Path, title: str = "") -> None:
-    """Grouped bars of mean total cost (± std) per hour and policy."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    hours = sorted({r["hour"] for r in summary})
-    policies = list(dict.fromkeys(r["policy"] for r in summary))
-    by = {(r["hour"], r["policy"]): r["total_cost"] for r in summary}
-    width = 0.8 / len(policies)
-    fig, ax = plt.subplots(figsize=(max(6.0, 1.6 * len(hours) + 0.4 * len(policies)), 4.0), dpi=110)
-    for k, pol in enumerate(policies):
-        xs = [i + (k - (len(policies) - 1) / 2) * width for i, h in enumerate(hours) if (h, pol) in by]
-        vals = [by[h, pol] for h in hours if (h, pol) in by]
-        ax.bar(xs, [v[0] for v in vals], width, yerr=[v[1] for v in vals], capsize=2, label=pol)
-    ax.set_xticks(range(len(hours)))
-    ax.set_xticklabels([f"{h}h" for h in hours])
-    ax.set_ylabel("total cost (request-minutes waited)")
-    ax.grid(axis="y", alpha=0.3)
-    lo, hi = ax.get_ylim()
-    ax.set_ylim(lo, hi * 1.22)  # headroom, so the legend never covers the tallest bars
-    ax.legend(fontsize=8, ncol=min(len(policies), 3), loc="upper left")
-    if title:
-        ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
 
 
 def write_json(doc: dict, path: str | Path) -> None:

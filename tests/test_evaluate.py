@@ -9,17 +9,22 @@ import numpy as np
 import pytest
 
 from city.errors import ConfigError, DataError
-from coordinator.evaluate import EvalConfig, compare, complete_seeds, evaluate, format_comparison, parse_policy, read_results, summarize
+from coordinator.analysis import bootstrap_ci, compare, complete_seeds, format_comparison, oracle_exceptions, summarize
+from coordinator.evaluate import EvalConfig, evaluate, instance_seed, parse_policy, read_results, write_json
+
+
+#: The route-planning oracle with a short search: these tests are about the harness, not the planner.
+FAST = {"oracle": {"iters": 200}}
 
 
 @pytest.fixture(scope="module")
 def small_run() -> dict:
-    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"])
+    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
     return evaluate(cfg, progress=lambda _msg: None)
 
 
 def test_same_seed_same_decisions(small_run: dict) -> None:
-    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"])
+    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
     again = evaluate(cfg, progress=lambda _msg: None)
     assert [e["decisions_sha256"] for e in again["episodes"]] == [e["decisions_sha256"] for e in small_run["episodes"]]
     assert [e["total_cost"] for e in again["episodes"]] == [e["total_cost"] for e in small_run["episodes"]]
@@ -31,7 +36,7 @@ def test_different_seeds_differ(small_run: dict) -> None:
 
 
 def test_parallel_workers_give_the_same_results(small_run: dict) -> None:
-    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], jobs=2)
+    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST, jobs=2)
     par = evaluate(cfg, progress=lambda _msg: None)
     assert [e["decisions_sha256"] for e in par["episodes"]] == [e["decisions_sha256"] for e in small_run["episodes"]]
 
@@ -66,23 +71,23 @@ def test_policy_specs_carry_options() -> None:
 
 def test_resume_keeps_finished_instances(small_run: dict, tmp_path: Path) -> None:
     path = tmp_path / "r.json"
-    one = EvalConfig(hours=[19], seeds=1, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"])
+    one = EvalConfig(hours=[19], seeds=1, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
     evaluate(one, progress=lambda _msg: None, checkpoint=path)
     first = json.loads(path.read_text())["episodes"]
     assert len(first) == 3
     msgs: list[str] = []
-    two = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"])
+    two = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
     doc = evaluate(two, progress=msgs.append, checkpoint=path, resume=True)
     assert msgs[0].startswith("resuming") and "[1/1]" in msgs[1] and len(msgs) == 2  # only seed 1 ran
     assert doc["episodes"][:3] == first
     assert [e["decisions_sha256"] for e in doc["episodes"]] == [e["decisions_sha256"] for e in small_run["episodes"]]
-    other = EvalConfig(hours=[19], seeds=2, taxis=30, minutes=20, policies=["greedy", "ia", "oracle"])
+    other = EvalConfig(hours=[19], seeds=2, taxis=30, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
     with pytest.raises(DataError, match="taxis=40"):
         evaluate(other, progress=lambda _msg: None, checkpoint=path, resume=True)
 
 
 def test_complete_seeds_drops_a_seed_missing_an_hour(small_run: dict) -> None:
-    extra = {**small_run["episodes"][0], "hour": 21, "seed": 0}
+    extra = {**small_run["episodes"][0], "hour": 21, "seed": 0}  # seed 0 is now at every hour, seed 1 at 19 h only
     doc = {**small_run, "episodes": small_run["episodes"] + [extra]}
     assert complete_seeds(doc)["episodes"] == [e for e in doc["episodes"] if e["seed"] == 0]
     assert complete_seeds(small_run)["episodes"] == small_run["episodes"]
@@ -90,7 +95,7 @@ def test_complete_seeds_drops_a_seed_missing_an_hour(small_run: dict) -> None:
 
 def test_compare_pairs_instances(small_run: dict) -> None:
     rows = compare(small_run, "ia")
-    assert [(r["against"], r["hour"], r["n"]) for r in rows] == [("greedy", 19, 2)]  # never against the oracle
+    assert [(r["against"], r["hour"], r["n"]) for r in rows] == [("greedy", 19, 2)]  # never against an oracle
     ia = [e for e in small_run["episodes"] if e["policy"] == "ia"]
     greedy = [e for e in small_run["episodes"] if e["policy"] == "greedy"]
     row = rows[0]
@@ -101,6 +106,9 @@ def test_compare_pairs_instances(small_run: dict) -> None:
     served = [np.mean([e["served"] for e in side]) for side in (ia, greedy)]
     assert row["served_change"] == pytest.approx(served[0] / served[1] - 1)
     assert row["below_oracle"] == sum(e["total_cost"] < e["oracle_cost"] for e in ia)
+    diffs = [a["total_cost"] - b["total_cost"] for a, b in zip(ia, greedy)]
+    assert row["ci95"] == list(bootstrap_ci(np.array(diffs)))
+    assert row["ci95"][0] <= row["cost_difference"] <= row["ci95"][1]
     text = format_comparison(rows)
     assert "ia paired with each policy" in text and f"{row['wins']:>5} / 2" in text
     with pytest.raises(ConfigError, match="'surge' is not in the results"):
@@ -117,3 +125,49 @@ def test_read_results_names_the_broken_episode(small_run: dict, tmp_path: Path) 
     path.write_text("{")
     with pytest.raises(DataError, match="not JSON"):
         read_results(path)
+
+
+def test_both_oracles_run_and_the_oracle_is_cheapest(small_run: dict) -> None:
+    assert small_run["reference_oracle"] == "oracle"
+    for e in small_run["episodes"]:
+        assert e["oracle_cost"] <= e["oracle_auction_cost"]
+    n, below = oracle_exceptions(small_run)
+    assert n == 2 and below == []
+    rows = {r["policy"]: r for r in summarize(small_run)}
+    assert rows["ia"]["gap_closed_auction"] is not None and rows["ia"]["gap_closed_auction"] >= rows["ia"]["gap_closed"]
+
+
+def test_old_results_read_with_their_oracle_renamed(small_run: dict, tmp_path: Path) -> None:
+    """A file from before the route planner: its 'oracle' was the auction, and it reads as oracle-auction."""
+    old = json.loads(json.dumps(small_run))
+    del old["reference_oracle"]
+    cfg = old["config"]
+    cfg["date"] = cfg.pop("dates")[0]
+    for e in old["episodes"]:
+        del e["date"], e["oracle_auction_cost"]
+    old["episodes"][0]["policy"] = "oracle"
+    path = tmp_path / "old.json"
+    write_json(old, path)
+    doc = read_results(path)
+    assert doc["reference_oracle"] == "oracle-auction" and doc["config"]["dates"] == ["2022-11-17"]
+    assert doc["episodes"][0]["policy"] == "oracle-auction"
+    assert "oracle" not in doc["config"]["policies"] and "oracle-auction" in doc["config"]["policies"]
+    assert all(e["date"] == "2022-11-17" and e["oracle_auction_cost"] == e["oracle_cost"] for e in doc["episodes"])
+    with pytest.raises(DataError, match="'oracle' was the auction"):
+        evaluate(EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST),
+                 progress=lambda _msg: None, checkpoint=path, resume=True)
+
+
+def test_instances_draw_their_own_rollout_seed() -> None:
+    seeds = {instance_seed(d, h, s) for d in ("2022-11-17", "2022-10-06") for h in (17, 19) for s in range(5)}
+    assert len(seeds) == 20
+    assert instance_seed("2022-11-17", 19, 3) == instance_seed("2022-11-17", 19, 3)
+
+
+def test_several_dates_pair_by_instance() -> None:
+    cfg = EvalConfig(dates=["2022-11-17", "2022-10-06"], hours=[19], seeds=1, taxis=20, minutes=10, policies=["greedy", "ia"], policy_options=FAST)
+    doc = evaluate(cfg, progress=lambda _msg: None)
+    assert [(e["date"], e["policy"]) for e in doc["episodes"]] == [
+        ("2022-11-17", "greedy"), ("2022-11-17", "ia"), ("2022-10-06", "greedy"), ("2022-10-06", "ia")]
+    (row,) = compare(doc, "ia")
+    assert row["n"] == 2 and row["dates"] == 2

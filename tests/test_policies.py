@@ -51,7 +51,7 @@ def test_ble_match_takes_closest_pairs_first() -> None:
 def test_unknown_policy_is_a_config_error() -> None:
     with pytest.raises(ConfigError, match="unknown policy 'nope'"):
         make_policy("nope", line_city(3))
-    assert {"greedy", "ia", "oracle"} <= set(policy_names())
+    assert {"greedy", "ia", "oracle", "oracle-auction"} <= set(policy_names())
 
 
 def _context(city, minutes: int) -> EpisodeContext:
@@ -79,21 +79,23 @@ def test_ia_does_not_send_two_taxis_to_one_request() -> None:
     assert ia.tolist() == [3, 5]
 
 
-def test_oracle_prepositions_for_future_requests() -> None:
+@pytest.mark.parametrize("oracle", ["oracle", "oracle-auction"])
+def test_oracles_preposition_for_future_requests(oracle: str) -> None:
     city = line_city(9)
     r = Requests.sorted(np.array([8]), np.array([0]), np.array([4]))
     res = {}
-    for name in ("greedy", "oracle"):
+    for name in ("greedy", oracle):
         res[name] = run_episode(city, make_policy(name, city), r, np.array([0]), _context(city, 12))
-    assert res["oracle"].total_cost == 4  # drives 8 hops, request waits from minute 4 to 8
+    assert res[oracle].total_cost == 4  # drives 8 hops, request waits from minute 4 to 8
     assert res["greedy"].total_cost == 8  # starts driving at minute 4 and is still on its way at the end
     assert res["greedy"].served == 0
 
 
-def test_oracle_requires_future() -> None:
+@pytest.mark.parametrize("oracle", ["oracle", "oracle-auction"])
+def test_oracles_require_future(oracle: str) -> None:
     city = line_city(3)
     with pytest.raises(ConfigError, match="future"):
-        make_policy("oracle", city).reset(_context(city, 5))
+        make_policy(oracle, city).reset(_context(city, 5))
 
 
 def test_option_strings_are_parsed_to_their_declared_types() -> None:

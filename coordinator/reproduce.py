@@ -1,0 +1,256 @@
+"""``surge reproduce``: the paper's experiment end to end, resumable, with its report.
+
+Steps, each showing progress on stderr:
+
+1. train the demand predictor (or reuse one already trained in ``OUT/model``);
+2. the predictor's percent-error comparison (``surge predictor eval``);
+3. the main comparison on the paper's date 2022-11-17: hours 15, 17, 19 and
+   21, 25 initial states, 100 taxis, 60 minutes: greedy, ia, garces2023
+   (previous-hour demand), surge (the trained model), oracle and
+   oracle-auction;
+4. the same policies at 17 and 19 h on further weekdays of the test months
+   with evening events, 10 initial states each;
+5. the ablations on 10 seeds at 17 and 19 h: both rollout policies with the
+   same information (previous hour, the model, true rates), surge with base
+   ``ia``, surge sampling the whole map, and pruning off for both;
+6. ``OUT/REPORT.md`` with its figures (:mod:`coordinator.report_md`).
+
+Every evaluation checkpoints its ``surge.results/1`` file under ``OUT`` after
+each instance and resumes from it, so an interrupted run continues where it
+stopped.  ``--quick`` runs 5 seeds on the paper's date only, fewer ablation
+seeds, 100 rollout samples and a small predictor.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import sys
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from city.errors import ConfigError
+
+PAPER_DATE = "2022-11-17"
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """The sizes of a reproduction run."""
+
+    hours: tuple[int, ...] = (15, 17, 19, 21)
+    seeds: int = 25
+    other_dates: int = 2
+    other_hours: tuple[int, ...] = (17, 19)
+    other_seeds: int = 10
+    ablation_hours: tuple[int, ...] = (17, 19)
+    ablation_seeds: int = 10
+    taxis: int = 100
+    minutes: int = 60
+    samples: int | None = None
+    oracle_iters: int | None = None
+    epochs: int = 100
+    event_epochs: int | None = None
+    predictor: bool = True
+    jobs: int = 1
+    gif_minutes: int = 60
+
+
+FULL = Protocol()
+QUICK = Protocol(seeds=5, other_dates=0, ablation_hours=(19,), ablation_seeds=2, samples=100, epochs=5, event_epochs=1, gif_minutes=30)
+#: Seconds' worth, for the CI smoke test: no predictor (training embeds a year of event texts), so
+#: ``surge`` plans with the true rates there and the report says so.
+SMOKE = Protocol(hours=(19,), seeds=1, other_dates=0, ablation_hours=(19,), ablation_seeds=1, taxis=8, minutes=6,
+                 samples=4, oracle_iters=20, epochs=1, predictor=False, gif_minutes=4)
+
+MAIN_POLICIES = ("greedy", "ia", "garces2023", "surge")
+ABLATIONS = (
+    "surge:forecast=previous-hour",
+    "surge:forecast=true-rate",
+    "garces2023:forecast=model",
+    "garces2023:forecast=true-rate",
+    "surge:base=ia",
+    "surge:scope=map",
+    "surge:prune=none",
+    "garces2023:prune=none",
+)
+
+
+@dataclass
+class Run:
+    """Where a reproduction writes, and what it has done."""
+
+    out: Path
+    scenario: str
+    data: str | None
+    protocol: Protocol
+    model_dir: Path | None = None
+    log: list[str] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def say(self, msg: str) -> None:
+        print(f"reproduce: {msg}", file=sys.stderr, flush=True)
+        self.log.append(msg)
+
+    @property
+    def model(self) -> Path:
+        return self.model_dir or self.out / "model"
+
+    @property
+    def forecast(self) -> str:
+        """What ``surge`` plans with where a label names no forecast: the trained model, or the true rates without a predictor."""
+        return "model" if self.protocol.predictor else "true-rate"
+
+
+def evening_event_dates(world, n: int, exclude: str = PAPER_DATE, year: int = 2022) -> list[str]:
+    """``n`` weekdays of the test months (September–December) with an event active at 19 h, spread evenly.
+
+    Holidays are skipped; the choice looks only at the event calendar, never
+    at demand or results.
+    """
+    if n <= 0:
+        return []
+    from city.demand import holidays
+
+    off = holidays(year)
+    days = []
+    d = dt.date(year, 9, 1)
+    while d.year == year:
+        if d.weekday() < 5 and d not in off and d.isoformat() != exclude:
+            if world.events_active(dt.datetime.combine(d, dt.time(19))):
+                days.append(d)
+        d += dt.timedelta(days=1)
+    if len(days) < n:
+        raise ConfigError(f"only {len(days)} weekdays of Sep-Dec {year} have an evening event; {n} wanted")
+    step = len(days) / n
+    return [days[int(step * k + step / 2)].isoformat() for k in range(n)]
+
+
+def _policy_options(run: Run, labels: list[str]) -> dict[str, dict]:
+    """Per-label options: the trained model for every forecast=model (surge's default), the run's sample count."""
+    from coordinator.evaluate import parse_policy
+
+    out = {}
+    for label in labels:
+        name, opts = parse_policy(label)
+        o: dict = {}
+        if name in ("surge", "garces2023"):
+            if run.protocol.samples is not None:
+                o["samples"] = run.protocol.samples
+            forecast = opts.get("forecast", run.forecast if name == "surge" else None)
+            if forecast == "model":
+                o["model"] = str(run.model)
+            elif name == "surge" and "forecast" not in opts:
+                o["forecast"] = forecast
+        if name == "oracle" and run.protocol.oracle_iters is not None:
+            o["iters"] = run.protocol.oracle_iters
+        if o:
+            out[label] = o
+    return out
+
+
+def _evaluate(run: Run, name: str, dates: list[str], hours: tuple[int, ...], seeds: int, labels: list[str]) -> dict:
+    from coordinator.evaluate import EvalConfig, evaluate
+
+    p = run.protocol
+    cfg = EvalConfig(scenario=run.scenario, data_dir=run.data, dates=dates, hours=list(hours), seeds=seeds, taxis=p.taxis,
+                     minutes=p.minutes, policies=labels, policy_options=_policy_options(run, labels + ["oracle"]), jobs=p.jobs)
+    path = run.out / f"results-{name}.json"
+    run.say(f"{name}: {len(dates)} date(s) x {len(hours)} hour(s) x {seeds} seeds, {len(labels)} policies + both oracles -> {path}")
+    t0 = time.perf_counter()
+    doc = evaluate(cfg, progress=lambda msg: run.say(f"{name} {msg}"), checkpoint=path, resume=True)
+    run.timings[name] = time.perf_counter() - t0
+    return doc
+
+
+def _train(run: Run) -> None:
+    from coordinator.cli import build_parser
+
+    if not run.protocol.predictor:
+        run.say("no predictor in this protocol: surge plans with the true rates (an upper bound)")
+        return
+    if (run.model / "model.json").exists():
+        run.say(f"reusing the trained predictor in {run.model}")
+        return
+    run.say(f"training the predictor ({run.protocol.epochs} epochs) into {run.model}")
+    t0 = time.perf_counter()
+    argv = ["predictor", "train", "--scenario", run.scenario, "--out", str(run.model), "--epochs", str(run.protocol.epochs)]
+    if run.protocol.event_epochs is not None:
+        argv += ["--event-epochs", str(run.protocol.event_epochs)]
+    if run.data:
+        argv += ["--data", run.data]
+    args = build_parser().parse_args(argv)
+    args.func(args)
+    run.timings["train"] = time.perf_counter() - t0
+
+
+def _predictor_eval(run: Run) -> dict | None:
+    from coordinator.cli import build_parser
+
+    if not run.protocol.predictor:
+        return None
+    path = run.out / "predictor-eval.json"
+    if not path.exists():
+        run.say("predictor percent error per hour (surge predictor eval)")
+        t0 = time.perf_counter()
+        args = build_parser().parse_args(["predictor", "eval", "--model", str(run.model), "--json", str(path),
+                                          "--plot", str(run.out / "fig-predictor-pe.png")])
+        args.func(args)
+        run.timings["predictor_eval"] = time.perf_counter() - t0
+    return json.loads(path.read_text())
+
+
+def reproduce(run: Run) -> Path:
+    """Run every step (resuming what is done) and write ``OUT/REPORT.md``; returns its path."""
+    from city.scenario import load_scenario
+    from coordinator import report_md
+
+    run.out.mkdir(parents=True, exist_ok=True)
+    p = run.protocol
+    t_all = time.perf_counter()
+    _train(run)
+    pe = _predictor_eval(run)
+    scen = load_scenario(run.scenario, run.data)
+    docs = {"main": _evaluate(run, "main", [PAPER_DATE], p.hours, p.seeds, list(MAIN_POLICIES))}
+    dates = evening_event_dates(scen.world, p.other_dates)
+    if dates:
+        docs["dates"] = _evaluate(run, "dates", dates, p.other_hours, p.other_seeds, list(MAIN_POLICIES))
+    ablations = [a for a in ABLATIONS if p.predictor or "forecast=model" not in a]
+    docs["ablation"] = _evaluate(run, "ablation", [PAPER_DATE], p.ablation_hours, p.ablation_seeds, list(MAIN_POLICIES) + ablations)
+    run.say("figures and REPORT.md")
+    t0 = time.perf_counter()
+    report = report_md.write_report(run, scen, docs, pe)
+    run.timings["report"] = time.perf_counter() - t0
+    run.timings["total (this invocation)"] = time.perf_counter() - t_all
+    (run.out / "timings.json").write_text(json.dumps(run.timings, indent=1))
+    run.say(f"wrote {report} in {run.timings['total (this invocation)']:.0f} s")
+    return report
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("reproduce", help="the paper's experiment end to end (resumable), with OUT/REPORT.md")
+    p.add_argument("--scenario", default="synthetic", help="synthetic (embedded) or nyc (needs --data)")
+    p.add_argument("--data", default=None, help="data directory laid out like shared/data (for --scenario nyc)")
+    p.add_argument("--out", default="reproduce-out", help="output directory; a rerun resumes from what it holds")
+    p.add_argument("--quick", action="store_true", help="5 seeds, one date, 2 ablation seeds at 19 h, 100 samples, small predictor")
+    p.add_argument("--smoke", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--jobs", type=int, default=1, help="worker processes for the evaluations")
+    p.add_argument("--model", default=None, help="reuse this trained predictor directory instead of training OUT/model")
+    p.set_defaults(func=cmd_reproduce)
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    from city.scenario import check_scenario
+
+    check_scenario(args.scenario, args.data)
+    if args.jobs < 1:
+        raise ConfigError(f"--jobs must be at least 1, got {args.jobs}")
+    protocol = SMOKE if args.smoke else QUICK if args.quick else FULL
+    model = Path(args.model) if args.model else None
+    if model is not None and not (model / "model.json").exists():
+        raise ConfigError(f"--model {model}: no model.json there (train one with surge predictor train)")
+    run = Run(out=Path(args.out), scenario=args.scenario, data=args.data, protocol=replace(protocol, jobs=args.jobs), model_dir=model)
+    print(reproduce(run))
+    return 0
