@@ -104,7 +104,7 @@ def test_option_strings_are_parsed_to_their_declared_types() -> None:
     assert parse_policy("surge:horizon=5,samples=20,prune=none,scope=map") == (
         "surge", {"horizon": 5, "samples": 20, "prune": None, "scope": "map"})
     assert parse_policy("garces2023:prune=auto,seed=3")[1] == {"prune": "auto", "seed": 3}
-    assert parse_policy("oracle:window=0")[1] == {"window": 0}
+    assert parse_policy("oracle-auction:window=0")[1] == {"window": 0}
 
 
 def test_every_policy_declares_exactly_the_options_its_constructor_takes() -> None:
