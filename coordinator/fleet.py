@@ -306,7 +306,6 @@ def cmd_certs(args) -> int:  # noqa: ANN001
 
 def add_parsers(sub) -> None:  # noqa: ANN001
     from bus.session import add_security_args, add_session_args
-    from coordinator.cli import _positive
 
     p = sub.add_parser("fleet", help="the local multi-process fleet: router, coordinator and one process per taxi on loopback")
     _fleet_args(p, taxis=8, minutes=20, samples=None)
@@ -316,10 +315,10 @@ def add_parsers(sub) -> None:  # noqa: ANN001
 
     k = sub.add_parser("certs", help="make a fleet's credentials: a CA, router, coordinator, predictor and one certificate per taxi")
     k.add_argument("--out", required=True, help="directory to write them to (created; must not hold credentials already)")
-    k.add_argument("--taxis", type=_positive, required=True, help="taxis, one certificate each (common names taxi-0 …)")
+    k.add_argument("--taxis", type=positive, required=True, help="taxis, one certificate each (common names taxi-0 …)")
     k.add_argument("--host", action="append", default=[], metavar="NAME",
                    help="a name or address clients reach the router by (repeatable; default 127.0.0.1 and localhost)")
-    k.add_argument("--days", type=_positive, default=365, help="days the certificates are valid (default 365)")
+    k.add_argument("--days", type=positive, default=365, help="days the certificates are valid (default 365)")
     k.set_defaults(func=cmd_certs)
 
     r = sub.add_parser("router", help="a zenoh router for runs across machines")
