@@ -64,7 +64,6 @@ nearest taxis only).  Independent agents can plan at once
 from __future__ import annotations
 
 import datetime as dt
-import threading
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, ClassVar
@@ -76,6 +75,7 @@ from agents import _kernels as K
 from agents.base import EpisodeContext, Option, Policy, register
 from agents.forecast import PROVIDERS, Forecast, ForecastProvider, make_provider
 from agents.greedy import greedy_controls
+from agents.shortcuts import MINUTE_NEAR_K, PlanStats, Shortcuts, transposed
 from agents.ia import ia_controls
 from city.errors import ConfigError
 from city.graph import City
@@ -243,71 +243,6 @@ def _pools(city: City, p: np.ndarray, sizes: np.ndarray, rng: np.random.Generato
 
 
 @dataclass(frozen=True)
-class Shortcuts:
-    """The exact savings of the rollout; none changes a decision, and each can be switched off to show it.
-
-    Attributes
-    ----------
-    skip : bool
-        Greedy base: no simulation when no candidate can reach any possible
-        pickup within the horizon (every rollout is then the same; the agent stays).
-    shadow : bool
-        Greedy base: replay each non-pickup candidate for the agent alone
-        against the reference candidate's pickups, and take the cost of the
-        candidate it provably equals (no pickup by the agent in either, or
-        trajectories merged); only the others are simulated in full.
-    reach : bool
-        Greedy base: leave out taxis that cannot reach any possible pickup
-        within the horizon; they never pick up, so no cost changes.
-    minute_lists : bool
-        The nearest-request lists once per minute over every outstanding
-        request (the pruned ones marked gone), not once per agent.  Off by
-        default: building them per agent is cheap, and a per-agent list of the
-        tracked requests alone was faster to search on all of Manhattan.
-    rows : bool
-        Contiguous transposed distance rows for the arrival checks.
-    """
-
-    skip: bool = True
-    shadow: bool = True
-    reach: bool = True
-    minute_lists: bool = False
-    rows: bool = True
-
-    @classmethod
-    def none(cls) -> Shortcuts:
-        return cls(skip=False, shadow=False, reach=False, minute_lists=False, rows=False)
-
-
-#: Nearest requests listed per node in the per-minute lists (a deeper list: pruned requests are in it).
-MINUTE_NEAR_K = 16
-
-
-class PlanStats:
-    """Counters of one minute's planning: decisions, those the shortcuts settled, simulations run and avoided."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self.decisions = 0
-        self.skipped = 0
-        self.settled = 0
-        self.cand_samples = 0
-        self.shadowed = 0
-
-    def add(self, skipped: bool, settled: bool, cand_samples: int, shadowed: int) -> None:
-        with self._lock:
-            self.decisions += 1
-            self.skipped += int(skipped)
-            self.settled += int(settled or skipped)
-            self.cand_samples += cand_samples
-            self.shadowed += shadowed
-
-    def as_dict(self) -> dict:
-        return {"decisions": self.decisions, "skipped": self.skipped, "settled": self.settled,
-                "candidate_samples": self.cand_samples, "shadow_settled": self.shadowed}
-
-
-@dataclass(frozen=True)
 class StepContext:
     """Everything the agents of one minute share; a pure function of the observation and forecast.
 
@@ -448,7 +383,7 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
         e_pick, e_drop, near, near_d, rel_node,
         sectors.astype(np.int64), tab.eta, tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum,
         tab.beta_cum, _max_arrivals(tab.eta[sectors], mode, ctx.minute0, H), city.dist,
-        *(_transposed(city) if sc.rows else (city.dist.T, city.next_hop.T)),
+        *(transposed(city) if sc.rows else (city.dist.T, city.next_hop.T)),
     )
     shadow = (cands != PICKUP) & (sc.shadow and greedy)
     return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow))
@@ -496,26 +431,6 @@ def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np
     inp = _decision_inputs(ctx, committed, agent)
     costs, _ = _run(ctx, inp, 0, ctx.config.samples, np.ones(inp.cands.size, dtype=bool))
     return inp.cands, costs
-
-
-_TRANSPOSED: dict[int, tuple[City, np.ndarray, np.ndarray]] = {}
-_TRANSPOSED_LOCK = threading.Lock()
-
-
-def _transposed(city: City) -> tuple[np.ndarray, np.ndarray]:
-    """``city.dist`` and ``city.next_hop`` transposed and contiguous, made once per city.
-
-    The rollout reads distances *to* an arrival's pickup from many taxis and
-    walks many taxis *towards* one target: with the target's row contiguous
-    those reads stay in cache (``Shortcuts.rows``).  Costs one more copy of
-    each matrix per process.
-    """
-    with _TRANSPOSED_LOCK:
-        hit = _TRANSPOSED.get(id(city))
-        if hit is None or hit[0] is not city:
-            hit = (city, np.ascontiguousarray(city.dist.T), np.ascontiguousarray(city.next_hop.T))
-            _TRANSPOSED[id(city)] = hit
-    return hit[1], hit[2]
 
 
 def _max_arrivals(eta: np.ndarray, mode: int, minute0: int, horizon: int) -> int:
