@@ -252,8 +252,6 @@ def read_zone_profile(path: Path | str, city: City, *, year: int = 2018) -> Zone
     """
     import warnings
 
-    import pandas as pd
-
     path = Path(path)
     values, n_rows = _zone_profile_columns(path)
     S = city.n_sectors
