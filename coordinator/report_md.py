@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from coordinator.analysis import compare_pair, complete_seeds, oracle_exceptions, plot, select, summarize
+from coordinator.analysis import compare_pair, complete_seeds, oracle_exceptions, plot, summarize
 
 HOURS = (15, 17, 19, 21)
 #: Table 1 of the paper, average total cost (mean, std) per hour.

@@ -112,9 +112,9 @@ def evening_event_dates(world, n: int, exclude: str = PAPER_DATE, year: int = 20
     """
     if n <= 0:
         return []
-    from city.demand import holidays
+    from city.calendar import holidays_for
 
-    off = holidays(year)
+    off = holidays_for(year)
     days = []
     d = dt.date(year, 9, 1)
     while d.year == year:
