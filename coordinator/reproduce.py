@@ -165,9 +165,16 @@ def _evaluate(run: Run, name: str, dates: list[str], hours: tuple[int, ...], see
     return doc
 
 
-def _train(run: Run) -> None:
-    from coordinator.cli import build_parser
+def _predictor_parser() -> argparse.ArgumentParser:
+    """The ``predictor`` subcommands alone, so that reproduce drives them without importing the CLI."""
+    from predictor.cli import add_parser
 
+    parser = argparse.ArgumentParser(prog="surge")
+    add_parser(parser.add_subparsers(dest="command", required=True))
+    return parser
+
+
+def _train(run: Run) -> None:
     if not run.protocol.predictor:
         run.say("no predictor in this protocol: surge plans with the true rates (an upper bound)")
         return
@@ -181,21 +188,19 @@ def _train(run: Run) -> None:
         argv += ["--event-epochs", str(run.protocol.event_epochs)]
     if run.data:
         argv += ["--data", run.data]
-    args = build_parser().parse_args(argv)
+    args = _predictor_parser().parse_args(argv)
     args.func(args)
     run.timings["train"] = time.perf_counter() - t0
 
 
 def _predictor_eval(run: Run) -> dict | None:
-    from coordinator.cli import build_parser
-
     if not run.protocol.predictor:
         return None
     path = run.out / "predictor-eval.json"
     if not path.exists():
         run.say("predictor percent error per hour (surge predictor eval)")
         t0 = time.perf_counter()
-        args = build_parser().parse_args(["predictor", "eval", "--model", str(run.model), "--json", str(path),
+        args = _predictor_parser().parse_args(["predictor", "eval", "--model", str(run.model), "--json", str(path),
                                           "--plot", str(run.out / "fig-predictor-pe.png")])
         args.func(args)
         run.timings["predictor_eval"] = time.perf_counter() - t0
