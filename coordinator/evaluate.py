@@ -305,13 +305,21 @@ def run_instances(cfg: EvalConfig, tasks: list[tuple[str, int, int]]) -> Iterato
         import multiprocessing as mp
         import os
 
-        # Workers share the cores: each gets its slice for the compiled rollout kernels.
-        os.environ.setdefault("NUMBA_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // cfg.jobs)))
+        # Workers share the cores: each gets its slice for the compiled rollout kernels. The
+        # variable is set only while the workers are spawned (they inherit it): numba re-reads
+        # it in this process at its next compile and refuses a change once its threads run.
+        previous = os.environ.get("NUMBA_NUM_THREADS")
+        os.environ["NUMBA_NUM_THREADS"] = previous or str(max(1, (os.cpu_count() or 1) // cfg.jobs))
         # A Pool, not a ProcessPoolExecutor: leaving the block for any reason (an error,
         # Ctrl-C, SIGTERM turned into SystemExit by the CLI) terminates the workers at once
         # instead of waiting for their instances or leaving them orphaned. Workers ignore
         # SIGINT so that Ctrl-C reaches only this process, which then stops them.
-        with mp.get_context("spawn").Pool(cfg.jobs, initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN)) as pool:
+        try:
+            pool = mp.get_context("spawn").Pool(cfg.jobs, initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN))
+        finally:
+            if previous is None:
+                del os.environ["NUMBA_NUM_THREADS"]
+        with pool:
             yield from pool.imap(_instance_task, work)
     else:
         yield from map(_instance_task, work)
