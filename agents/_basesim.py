@@ -1,0 +1,528 @@
+"""The base policies simulated inside a rollout (numba, ``cache=True``): greedy, its
+one-taxi shadow replay, and instantaneous assignment.
+
+Conventions are those of :mod:`agents._kernels`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from agents._sampling import _BIG
+
+@njit(cache=True)
+def _nearest(
+    v: int,
+    lb: int,
+    seen: int,
+    n_seen: int,
+    alive: np.ndarray,
+    act: np.ndarray,
+    n_act: int,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    e_pick: np.ndarray,
+    a_pick: np.ndarray,
+    dist: np.ndarray,
+    dist_t: np.ndarray,
+) -> tuple[int, int, int]:
+    """The alive request nearest to node ``v`` by ``(distance, code)``; ``(BIG, -1)`` if none.
+
+    ``lb`` bounds from below the distance from ``v`` to the alive arrivals
+    among the first ``seen`` (negative when unknown); ``n_seen`` arrivals
+    have entered.  Arrivals are younger than every outstanding request, so
+    when the nearest outstanding request is no farther than the bound the
+    arrivals are not scanned.  Returns ``(distance, code, bound)``, the bound
+    now covering all ``n_seen`` arrivals (exact when they were scanned).
+    """
+    r0 = e_pick.shape[0]
+    best_d = _BIG
+    best_c = -1
+    kl = near.shape[1]
+    for j in range(kl):
+        r = near[v, j]
+        if alive[r]:
+            best_d = np.int64(near_d[v, j])
+            best_c = r
+            break
+    if best_c < 0 and r0 > kl:
+        row = dist[v]
+        for r in range(r0):
+            if alive[r]:
+                d = np.int64(row[e_pick[r]])
+                if d < best_d:
+                    best_d = d
+                    best_c = r
+    if lb >= 0:
+        for a in range(seen, n_seen):
+            if alive[r0 + a]:
+                lb = min(lb, np.int64(dist_t[a_pick[a], v]))
+        if lb >= best_d:
+            return best_d, best_c, lb
+    arr_d = _BIG
+    for j in range(n_act):
+        c = act[j]
+        if alive[c]:
+            d = np.int64(dist_t[a_pick[c - r0], v])
+            arr_d = min(arr_d, d)
+            if d < best_d or (d == best_d and c < best_c):
+                best_d = d
+                best_c = c
+    return best_d, best_c, arr_d
+
+
+@njit(cache=True)
+def _oldest_at(
+    v: int,
+    alive: np.ndarray,
+    act: np.ndarray,
+    n_act: int,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    e_pick: np.ndarray,
+    a_pick: np.ndarray,
+) -> int:
+    """Code of the oldest alive request waiting at node ``v``, or -1."""
+    r0 = e_pick.shape[0]
+    kl = near.shape[1]
+    j = 0
+    while j < kl and near_d[v, j] == 0:
+        if alive[near[v, j]]:
+            return near[v, j]
+        j += 1
+    if j == kl and r0 > kl:
+        for r in range(r0):
+            if alive[r] and e_pick[r] == v:
+                return r
+    best = -1
+    for j in range(n_act):
+        c = act[j]
+        if alive[c] and a_pick[c - r0] == v and (best < 0 or c < best):
+            best = c
+    return best
+
+
+@njit(cache=True)
+def _walk(v: int, target: int, hops: int, hop_t: np.ndarray) -> int:
+    """The node ``hops`` hops from ``v`` along the shortest path to ``target`` (``hop_t[target, v]`` is v's next hop)."""
+    for _ in range(hops):
+        v = hop_t[target, v]
+    return v
+
+
+@njit(cache=True)
+def _simulate_greedy(
+    horizon: int,
+    alive: np.ndarray,
+    n_alive: int,
+    tpos: np.ndarray,
+    tfree: np.ndarray,
+    n_arr: int,
+    a_pick: np.ndarray,
+    a_drop: np.ndarray,
+    a_step: np.ndarray,
+    e_pick: np.ndarray,
+    e_drop: np.ndarray,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    dist: np.ndarray,
+    dist_t: np.ndarray,
+    hop_t: np.ndarray,
+    act: np.ndarray,
+    tgt: np.ndarray,
+    kanc: np.ndarray,
+    d0: np.ndarray,
+    need: np.ndarray,
+    elig: np.ndarray,
+    plan_c: np.ndarray,
+    plan_d: np.ndarray,
+    ag: int,
+    rec_pos: np.ndarray,
+    rec_tgt: np.ndarray,
+    ev_step: np.ndarray,
+    ev_code: np.ndarray,
+) -> tuple[int, int, int]:
+    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``(Σ g_k + g_H, T, events)``.
+
+    A free taxi heading for its nearest request keeps it as the nearest while
+    it moves (the target gets exactly one hop closer, every other request at
+    most one, and an equally near request that was younger stays younger), so
+    the target changes only when it is picked up by another taxi or a strictly
+    nearer request arrives.  A taxi's plan is therefore stored as (anchor
+    node, anchor step, target, distance) and its position is walked only when
+    an event needs it: this is exactly :func:`agents.greedy.greedy_controls`
+    applied step by step, at a cost per event instead of per taxi and step.
+    ``tpos`` holds each taxi's node at its anchor (or drop-off when busy).
+    ``plan_c``/``plan_d`` are the step-1 plans of the taxis free at step 1
+    among the outstanding requests (the same in every sample; see
+    :func:`_first_plans`), so that only the arrivals are compared here.
+
+    For the shadow shortcut (:func:`_shadow_greedy`), when ``ag >= 0`` the
+    deciding agent (taxi ``ag``) has its state recorded at the start of each
+    step, ``(node, target)`` in ``rec_pos``/``rec_tgt``, until ``T``, the first
+    step at which it stands at its target to pick up (``_BIG`` if never); when
+    ``ev_step`` is not empty every pickup is recorded there as (step, code).
+    """
+    r0 = e_pick.shape[0]
+    mt = tpos.shape[0]
+    n_act = 0
+    ai = 0
+    cost = 0
+    t_first = _BIG
+    n_ev = 0
+    record_ev = ev_step.shape[0] > 0
+    for i in range(mt):
+        need[i] = tfree[i] > 1
+        tgt[i] = plan_c[i] if tfree[i] <= 1 else -1
+        kanc[i] = 1
+        d0[i] = plan_d[i]
+    for k in range(1, horizon + 1):
+        if ag >= 0 and t_first == _BIG:
+            c = tgt[ag]
+            v = tpos[ag]
+            if c >= 0:
+                v = _walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(k - kanc[ag], d0[ag]), hop_t)
+            rec_pos[k] = v
+            rec_tgt[k] = c
+        first_new = ai
+        while ai < n_arr and a_step[ai] == k:
+            act[n_act] = r0 + ai
+            n_act += 1
+            n_alive += 1
+            ai += 1
+        # Plans for this step, from the state at its start.
+        n_el = 0
+        for i in range(mt):
+            if tfree[i] > k:
+                continue
+            c = tgt[i]
+            if c < 0 and not need[i] and ai == first_new:
+                continue
+            if need[i] or c < 0:
+                v = tpos[i]
+                if c >= 0:
+                    p = e_pick[c] if c < r0 else a_pick[c - r0]
+                    v = _walk(v, p, min(k - kanc[i], d0[i]), hop_t)
+                d, c2, _ = _nearest(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                tpos[i] = v
+                kanc[i] = k
+                tgt[i] = c2
+                d0[i] = d
+                need[i] = False
+                continue
+            if ai > first_new and kanc[i] + d0[i] > k:
+                elig[n_el] = i
+                n_el += 1
+        # Taxis keeping their target meet this step's arrivals, arrival by arrival
+        # (each taxi's updates stay in arrival order; one distance row per arrival).
+        for a in range(first_new, ai):
+            p = a_pick[a]
+            row_t = dist_t[p]
+            for e in range(n_el):
+                i = elig[e]
+                if row_t[tpos[i]] >= d0[i]:
+                    continue
+                rem = kanc[i] + d0[i] - k
+                ct = tgt[i]
+                pt = e_pick[ct] if ct < r0 else a_pick[ct - r0]
+                v = _walk(tpos[i], pt, k - kanc[i], hop_t)
+                d = np.int64(row_t[v])
+                tpos[i] = v
+                d0[i] = rem
+                kanc[i] = k
+                if d < rem:
+                    tgt[i] = r0 + a
+                    d0[i] = d
+        # Pickups, in agent order, by the taxis standing at their target.
+        for i in range(mt):
+            if tfree[i] > k or tgt[i] < 0 or kanc[i] + d0[i] != k:
+                continue
+            if i == ag and t_first == _BIG:
+                t_first = k
+            c = tgt[i]
+            v = e_pick[c] if c < r0 else a_pick[c - r0]
+            r = _oldest_at(v, alive, act, n_act, near, near_d, e_pick, a_pick)
+            if r < 0:
+                continue
+            alive[r] = False
+            n_alive -= 1
+            if record_ev:
+                ev_step[n_ev] = k
+                ev_code[n_ev] = r
+                n_ev += 1
+            drop = e_drop[r] if r < r0 else a_drop[r - r0]
+            tpos[i] = drop
+            tfree[i] = k + 1 + max(1, np.int64(dist[v, drop]))
+            tgt[i] = -1
+            need[i] = True
+            for j in range(mt):
+                if tgt[j] == r:
+                    need[j] = True
+            if r >= r0:
+                for j in range(n_act):
+                    if act[j] == r:
+                        act[j] = act[n_act - 1]
+                        n_act -= 1
+                        break
+        cost += n_alive
+    return cost + n_alive, t_first, n_ev
+
+
+@njit(cache=True)
+def _shadow_greedy(
+    horizon: int,
+    c: int,
+    pos: int,
+    tgt: int,
+    d0: int,
+    alive: np.ndarray,
+    n_arr: int,
+    a_pick: np.ndarray,
+    a_step: np.ndarray,
+    e_pick: np.ndarray,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    dist: np.ndarray,
+    dist_t: np.ndarray,
+    hop_t: np.ndarray,
+    act: np.ndarray,
+    ev_step: np.ndarray,
+    ev_code: np.ndarray,
+    n_ev: int,
+    full: np.ndarray,
+    rec_pos: np.ndarray,
+    rec_tgt: np.ndarray,
+    rec_t: np.ndarray,
+) -> int:
+    """Candidate ``c``'s rollout replayed for the deciding agent alone; the candidate whose cost it has, or -1.
+
+    Greedy taxis interact only through pickups, so until the agent first
+    stands at its target (in ``c`` or in the reference candidate 0) every
+    other taxi of ``c`` does exactly what it does in candidate 0, whose
+    pickups (``ev_step``/``ev_code``) are replayed here.  If neither agent
+    reaches a pickup within the horizon the two costs are equal; if at the
+    start of a step the agent's (node, target) equals that of a fully
+    simulated candidate ``f`` (``full[f]``) that has not picked up yet either,
+    the whole states agree and so do the rest of the rollouts.  Otherwise
+    -1: ``c`` needs a full simulation.  ``alive`` holds candidate 0's alive
+    flags at step 1 (arrivals included) and is modified.
+    """
+    r0 = e_pick.shape[0]
+    t_ref = rec_t[0]
+    kanc = 1
+    need = False
+    n_act = 0
+    ai = 0
+    e = 0
+    for k in range(1, horizon + 2):
+        if k > t_ref:
+            return -1
+        if k == horizon + 1:
+            return 0
+        v = pos
+        if tgt >= 0:
+            v = _walk(v, e_pick[tgt] if tgt < r0 else a_pick[tgt - r0], min(k - kanc, d0), hop_t)
+        for f in range(c):
+            if full[f] and k <= rec_t[f] and rec_pos[f, k] == v and rec_tgt[f, k] == tgt:
+                return f
+        first_new = ai
+        while ai < n_arr and a_step[ai] == k:
+            act[n_act] = r0 + ai
+            n_act += 1
+            ai += 1
+        if tgt < 0 and not need and ai == first_new:
+            pass
+        elif need or tgt < 0:
+            d, c2, _ = _nearest(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+            pos = v
+            kanc = k
+            tgt = c2
+            d0 = d
+            need = False
+        elif kanc + d0 > k:
+            for a in range(first_new, ai):
+                p = a_pick[a]
+                if dist[pos, p] >= d0:
+                    continue
+                rem = kanc + d0 - k
+                v = _walk(pos, e_pick[tgt] if tgt < r0 else a_pick[tgt - r0], k - kanc, hop_t)
+                d = np.int64(dist[v, p])
+                pos = v
+                d0 = rem
+                kanc = k
+                if d < rem:
+                    tgt = r0 + a
+                    d0 = d
+        if tgt >= 0 and kanc + d0 == k:
+            return -1
+        while e < n_ev and ev_step[e] == k:
+            r = ev_code[e]
+            alive[r] = False
+            if r == tgt:
+                need = True
+            if r >= r0:
+                for j in range(n_act):
+                    if act[j] == r:
+                        act[j] = act[n_act - 1]
+                        n_act -= 1
+                        break
+            e += 1
+    return -1
+
+
+@njit(cache=True, inline="always")
+def _heap_push(heap: np.ndarray, n: int, key: int) -> int:
+    """Push ``key`` onto the min-heap ``heap[:n]``; return the new size."""
+    j = n
+    heap[j] = key
+    while j > 0:
+        parent = (j - 1) >> 1
+        if heap[parent] <= heap[j]:
+            break
+        heap[parent], heap[j] = heap[j], heap[parent]
+        j = parent
+    return n + 1
+
+
+@njit(cache=True, inline="always")
+def _heap_pop(heap: np.ndarray, n: int) -> tuple[int, int]:
+    """Pop the smallest key of the min-heap ``heap[:n]``; return it and the new size."""
+    top = heap[0]
+    n -= 1
+    heap[0] = heap[n]
+    j = 0
+    while True:
+        a = 2 * j + 1
+        if a >= n:
+            break
+        if a + 1 < n and heap[a + 1] < heap[a]:
+            a += 1
+        if heap[j] <= heap[a]:
+            break
+        heap[j], heap[a] = heap[a], heap[j]
+        j = a
+    return top, n
+
+
+@njit(cache=True)
+def _simulate_ia(
+    horizon: int,
+    alive: np.ndarray,
+    n_alive: int,
+    tpos: np.ndarray,
+    tfree: np.ndarray,
+    n_arr: int,
+    a_pick: np.ndarray,
+    a_drop: np.ndarray,
+    a_step: np.ndarray,
+    e_pick: np.ndarray,
+    e_drop: np.ndarray,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    dist: np.ndarray,
+    dist_t: np.ndarray,
+    hop_t: np.ndarray,
+    act: np.ndarray,
+    lb: np.ndarray,
+    seen: np.ndarray,
+    free: np.ndarray,
+    best_d: np.ndarray,
+    best_c: np.ndarray,
+    target: np.ndarray,
+    matched: np.ndarray,
+    heap: np.ndarray,
+) -> int:
+    """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``Σ g_k + g_H``.
+
+    Every step, :func:`agents.ia.ia_controls`: broadcast of local eligibility
+    commits the globally closest (distance, taxi, request) pair, retires both,
+    and repeats; each taxi's nearest free request is refreshed lazily.  ``lb[i]``
+    bounds taxi ``i``'s distance to the alive arrivals among the first
+    ``seen[i]`` from below (see :func:`_nearest`): it drops by one when the
+    taxi moves a hop and is unknown (-1) after a pickup.
+    """
+    r0 = e_pick.shape[0]
+    mt = tpos.shape[0]
+    n_act = 0
+    ai = 0
+    cost = 0
+    for i in range(mt):
+        lb[i] = -1
+    for k in range(1, horizon + 1):
+        while ai < n_arr and a_step[ai] == k:
+            act[n_act] = r0 + ai
+            n_act += 1
+            n_alive += 1
+            ai += 1
+        nf = 0
+        for i in range(mt):
+            if tfree[i] <= k:
+                free[nf] = i
+                target[nf] = -1
+                nf += 1
+        if nf > 0 and n_alive > 0:
+            for f in range(nf):
+                i = free[f]
+                best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                seen[i] = ai
+            # A binary heap of (distance, taxi) keys; a key whose request was taken
+            # meanwhile is refreshed when it surfaces (keys only ever grow).
+            n_h = 0
+            for f in range(nf):
+                if best_c[f] >= 0:
+                    n_h = _heap_push(heap, n_h, best_d[f] * mt + f)
+            n_m = 0
+            while n_h > 0:
+                key, n_h = _heap_pop(heap, n_h)
+                f = key % mt
+                c = best_c[f]
+                if not alive[c]:
+                    i = free[f]
+                    best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                    if best_c[f] >= 0:
+                        n_h = _heap_push(heap, n_h, best_d[f] * mt + f)
+                    continue
+                target[f] = c
+                alive[c] = False
+                matched[n_m] = c
+                n_m += 1
+            for j in range(n_m):
+                c = matched[j]
+                alive[c] = True
+                if c >= r0:
+                    # The arrival was hidden while bounds were refreshed: bring them back below it.
+                    p = a_pick[c - r0]
+                    for f in range(nf):
+                        i = free[f]
+                        if lb[i] >= 0:
+                            lb[i] = min(lb[i], np.int64(dist[tpos[i], p]))
+            for f in range(nf):
+                c = target[f]
+                if c < 0:
+                    continue
+                i = free[f]
+                v = tpos[i]
+                p = e_pick[c] if c < r0 else a_pick[c - r0]
+                if p != v:
+                    tpos[i] = hop_t[p, v]
+                    if lb[i] > 0:
+                        lb[i] -= 1
+                    continue
+                r = _oldest_at(v, alive, act, n_act, near, near_d, e_pick, a_pick)
+                if r < 0:
+                    continue
+                alive[r] = False
+                n_alive -= 1
+                drop = e_drop[r] if r < r0 else a_drop[r - r0]
+                tpos[i] = drop
+                tfree[i] = k + 1 + max(1, np.int64(dist[v, drop]))
+                lb[i] = -1
+                if r >= r0:
+                    for j in range(n_act):
+                        if act[j] == r:
+                            act[j] = act[n_act - 1]
+                            n_act -= 1
+                            break
+        cost += n_alive
+    return cost + n_alive
