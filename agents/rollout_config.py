@@ -1,0 +1,83 @@
+"""The settings of a rollout planner, checked once: what :mod:`agents.rollout` plans with."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from agents import _kernels as K
+from city.errors import ConfigError
+
+BASES = {"greedy": K.GREEDY, "ia": K.IA}
+SCOPES = ("local", "map")
+CE_MODES = {"limited": K.LIMITED_CE, "standard": K.STANDARD_CE}
+#: Nearest tracked requests listed per node; searches past them scan all tracked requests.
+NEAR_K = 8
+
+
+@dataclass(frozen=True)
+class RolloutConfig:
+    """Parameters of a rollout planner.
+
+    Attributes
+    ----------
+    horizon : int
+        H, minutes of base policy after the decision minute.
+    samples : int
+        Monte-Carlo samples per agent decision.
+    base : str
+        Base policy: ``greedy`` or ``ia``.
+    scope : str
+        Where future requests are sampled: ``local`` (the agent's sector and
+        its adjacent sectors) or ``map`` (every sector).
+    ce : str
+        Certainty equivalence: ``limited`` (surge) or ``standard`` (Garces et al.).
+    seed : int
+        Seed of every decision's random numbers.
+    prune : int or None
+        Leave out taxis and requests farther than this many hops (either
+        direction) from the deciding agent; ``None`` simulates the whole map.
+    cap : int or None
+        Approximation, off by default: simulate at most this many taxis, the
+        agent and its nearest (in hops, either direction), besides the radius.
+    adaptive : float or None
+        Approximation, off by default: run the samples in batches of
+        ``batch`` and drop a candidate once its mean paired difference from
+        the best candidate (common random numbers) exceeds ``adaptive``
+        standard errors; the decision is the best of those left.
+    batch : int
+        Samples per batch of ``adaptive``.
+    """
+
+    horizon: int = 10
+    samples: int = 1000
+    base: str = "greedy"
+    scope: str = "local"
+    ce: str = "limited"
+    seed: int = 0
+    prune: int | None = None
+    cap: int | None = None
+    adaptive: float | None = None
+    batch: int = 100
+
+    def __post_init__(self) -> None:
+        if self.horizon < 1 or self.samples < 1:
+            raise ConfigError(f"rollout: horizon and samples must be at least 1, got {self.horizon} and {self.samples}")
+        if self.base not in BASES:
+            raise ConfigError(f"rollout: unknown base policy {self.base!r}; choose from {', '.join(BASES)}")
+        if self.scope not in SCOPES:
+            raise ConfigError(f"rollout: unknown scope {self.scope!r}; choose from {', '.join(SCOPES)}")
+        if self.ce not in CE_MODES:
+            raise ConfigError(f"rollout: unknown certainty equivalence {self.ce!r}; choose from {', '.join(CE_MODES)}")
+        if self.prune is not None and self.prune < 0:
+            raise ConfigError(f"rollout: prune radius must be non-negative, got {self.prune}")
+        if self.cap is not None and self.cap < 1:
+            raise ConfigError(f"rollout: cap must be at least 1 taxi, got {self.cap}")
+        if self.adaptive is not None and not self.adaptive > 0:
+            raise ConfigError(f"rollout: adaptive must be a positive number of standard errors, got {self.adaptive}")
+        if self.batch < 2:
+            raise ConfigError(f"rollout: batch must be at least 2 samples, got {self.batch}")
+
+
+def default_prune(horizon: int) -> int:
+    """The default pruning radius: twice the hops a taxi covers in a rollout, ``2 (H + 1)``."""
+    return 2 * (horizon + 1)
