@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import os
 from pathlib import Path
 
@@ -47,6 +48,25 @@ def grid_edges(side: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             u += [i, i + side]
             v += [i + side, i]
     return xy, np.array(u), np.array(v)
+
+
+class ListedWorld:
+    """The stand-in worlds' common reading side: hourly counts, true rates and events held in lists.
+
+    Subclasses set ``year``, ``events``, ``_rate`` and ``_counts`` and draw their own requests.
+    """
+
+    def hour_index(self, when: dt.datetime) -> int:
+        return (when.date() - dt.date(self.year, 1, 1)).days * 24 + when.hour
+
+    def hourly_counts(self) -> np.ndarray:
+        return self._counts
+
+    def expected_rate(self) -> np.ndarray:
+        return self._rate
+
+    def events_active(self, when: dt.datetime) -> list:
+        return [ev for ev in self.events if ev.active(when)]
 
 
 @pytest.fixture

@@ -15,13 +15,13 @@ from city.events import Event
 from city.graph import City
 from city.sim import Requests
 from city.weather import HourlyWeather, hours_in_year
-from tests.conftest import grid_edges
+from tests.conftest import ListedWorld, grid_edges
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 # --------------------------------------------------------------- stand-in world
-class TinyWorld:
+class TinyWorld(ListedWorld):
     """A 4x4 grid in 2 sectors, a year of counts, and a few evening events with reviews."""
 
     def __init__(self, year: int = 2022, seed: int = 0) -> None:
@@ -61,18 +61,6 @@ class TinyWorld:
             rate[h0 : h0 + 2, 0] *= 3.0 if big else 1.1
         self._rate = rate
         self._counts = rng.poisson(rate)
-
-    def hour_index(self, when: dt.datetime) -> int:
-        return (when.date() - dt.date(self.year, 1, 1)).days * 24 + when.hour
-
-    def hourly_counts(self) -> np.ndarray:
-        return self._counts
-
-    def expected_rate(self) -> np.ndarray:
-        return self._rate
-
-    def events_active(self, when: dt.datetime) -> list[Event]:
-        return [ev for ev in self.events if ev.active(when)]
 
     def requests(self, date: dt.date, hour: int, minutes: int = 60) -> Requests:
         h = self.hour_index(dt.datetime.combine(date, dt.time(hour)))

@@ -25,14 +25,14 @@ from city.events import Event, Venue
 from city.graph import City
 from city.sim import Requests
 from city.weather import HourlyWeather, hours_in_year
-from tests.conftest import grid_edges
+from tests.conftest import ListedWorld, grid_edges
 
 BIG = ("Sold-out stadium concert tonight", "Every seat sold for the farewell tour", "Sold out: the biggest show of the year")
 SMALL = ("Quiet acoustic set in the side room", "A small, half-empty matinee", "Low-key rehearsal open to a few guests")
 VENUE_REVIEWS = ("Easy to reach by subway", "Clean venue, friendly staff", "Bars are pricey")
 
 
-class TextSignalWorld:
+class TextSignalWorld(ListedWorld):
     """Two sectors, one venue, an event every evening; text planted or noise (see the module notes)."""
 
     def __init__(self, planted: bool, year: int = 2022, seed: int = 3) -> None:
@@ -68,18 +68,6 @@ class TextSignalWorld:
             rate[h0 : h0 + 5, 0] *= 3.0 if big else 1.2
         self._rate = rate
         self._counts = rng.poisson(rate)
-
-    def hour_index(self, when: dt.datetime) -> int:
-        return (when.date() - dt.date(self.year, 1, 1)).days * 24 + when.hour
-
-    def hourly_counts(self) -> np.ndarray:
-        return self._counts
-
-    def expected_rate(self) -> np.ndarray:
-        return self._rate
-
-    def events_active(self, when: dt.datetime) -> list[Event]:
-        return [ev for ev in self.events if ev.active(when)]
 
     def requests(self, date: dt.date, hour: int, minutes: int = 60) -> Requests:
         h = self.hour_index(dt.datetime.combine(date, dt.time(hour)))
