@@ -222,24 +222,25 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
     if spec is None:
         world = synthetic_world(city, year=year, seed=seed, share=share or FLEET_SHARE)
         return Scenario(name=name, city=city, world=world, data_dir=check_scenario(name, data_dir))
-    schedules = None
-    if spec.occupancy is not None:
-        from city.occupancy import read_occupancy_csv
-
-        schedules = read_occupancy_csv(spec.occupancy)
-    return Scenario(name=name, city=city, world=build_world(spec, city, year=year, seed=seed, share=share), data_dir=spec.data_dir,
-                    spec=spec, schedules=schedules)
+    world = build_world(spec, city, year=year, seed=seed, share=share)
+    return Scenario(name=name, city=city, world=world, data_dir=spec.data_dir, spec=spec, schedules=world.schedules)
 
 
 def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int = 0, share: float | None = None) -> object:
     """The demand world of a scenario file on its city.
 
     The first ``[[trips]]`` entry with files is used; ``share`` (a command's
-    ``--share``) overrides its ``share``.
+    ``--share``) overrides its ``share``.  The file's ``[holidays]`` and
+    ``[occupancy]`` schedules go into the world.
     """
     from city.demand import RecordedWorld, synthetic_world
     from city.demand.profile import FLEET_SHARE
 
+    calendar = {"holidays": (spec.holidays["country"], spec.holidays["subdiv"]), "schedules": None}
+    if spec.occupancy is not None:
+        from city.occupancy import read_occupancy_csv
+
+        calendar["schedules"] = read_occupancy_csv(spec.occupancy)
     weather = pois = None
     if spec.weather is not None:
         from city.weather import read_weather_csv
@@ -254,7 +255,7 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
     if trips is not None and trips.kind == "zone-od":
         profile = load_zone_profile(trips.files[0], city)
         return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, zone_profile=profile,
-                               share=share or trips.share or FLEET_SHARE)
+                               share=share or trips.share or FLEET_SHARE, **calendar)
     if trips is not None:
         from city.trips import read_fhvhv
 
@@ -262,8 +263,9 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
         keep = share if share is not None else trips.share
         if keep is not None and keep < 1.0:
             table = sample_trips(table, keep, seed)
-        return RecordedWorld(city, table, year=year, seed=seed, events=read_scenario_events(spec, city), weather=weather, pois=pois)
-    return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, share=share or FLEET_SHARE)
+        return RecordedWorld(city, table, year=year, seed=seed, events=read_scenario_events(spec, city), weather=weather, pois=pois,
+                             **calendar)
+    return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, share=share or FLEET_SHARE, **calendar)
 
 
 def sample_trips(table, share: float, seed: int):  # noqa: ANN001, ANN201

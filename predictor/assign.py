@@ -22,9 +22,12 @@ from city.occupancy import day_type, occupancy, sector_distribution
 from predictor.dataset import TRAIN_MONTHS
 
 
-def node_distribution(city, locale_counts: np.ndarray, when: dt.datetime) -> np.ndarray:
-    """p(ρ = j) = p(δ = j) within each sector, shape ``(n,)``; sums to 1 over each sector."""
-    weights = occupancy(np.asarray(locale_counts), when.hour, day_type(when.date()))
+def node_distribution(city, locale_counts: np.ndarray, when: dt.datetime, schedules: dict | None = None) -> np.ndarray:
+    """p(ρ = j) = p(δ = j) within each sector, shape ``(n,)``; sums to 1 over each sector.
+
+    ``schedules`` are the world's occupancy schedules (a scenario's ``[occupancy]``), the built-in ones if ``None``.
+    """
+    weights = occupancy(np.asarray(locale_counts), when.hour, day_type(when.date()), schedules)
     return sector_distribution(weights, np.asarray(city.node_sector), int(city.n_sectors), np.asarray(city.pickup, bool))
 
 

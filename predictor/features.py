@@ -8,7 +8,7 @@ Base features f (both networks; paper §4.2.1 "temporal and spatial data"):
   one-hot month would leave the test months (Sep–Dec) with untrained weights,
   because the networks train on Jan–Jun only; the cyclic code at least lets
   them interpolate the seasonal trend.
-* US federal holiday flag (1), from :func:`city.calendar.holidays_for`
+* holiday flag (1): the world's holidays (a scenario's ``[holidays]``), US federal by default
 * weather: temperature (°F), precipitation (in), wind (mph), z-scored with the
   training months' mean and standard deviation (3)
 * the sector's identity, one-hot (S).  The paper calls weather "spatial"; surge
@@ -58,14 +58,15 @@ def temporal_names() -> list[str]:
     return [f"hour_{h}" for h in range(24)] + [f"weekday_{d}" for d in range(7)] + ["month_sin", "month_cos", "holiday"]
 
 
-def temporal_features(when: dt.datetime) -> np.ndarray:
+def temporal_features(when: dt.datetime, holidays: frozenset[dt.date] | None = None) -> np.ndarray:
+    """One hour's temporal features; ``holidays`` is the world's holiday set (default: US federal)."""
     f = np.zeros(N_TEMPORAL, dtype=np.float32)
     f[when.hour] = 1.0
     f[24 + when.weekday()] = 1.0
     ang = 2 * np.pi * (when.month - 1) / 12.0
     f[31] = np.sin(ang)
     f[32] = np.cos(ang)
-    f[33] = 1.0 if when.date() in holidays_for(when.year) else 0.0
+    f[33] = 1.0 if when.date() in (holidays_for(when.year) if holidays is None else holidays) else 0.0
     return f
 
 
@@ -79,8 +80,8 @@ def hour_index(when: dt.datetime, year: int) -> int:
     return (when.date() - dt.date(year, 1, 1)).days * 24 + when.hour
 
 
-def temporal_matrix(year: int) -> np.ndarray:
-    return np.stack([temporal_features(h) for h in year_hours(year)])
+def temporal_matrix(year: int, holidays: frozenset[dt.date] | None = None) -> np.ndarray:
+    return np.stack([temporal_features(h, holidays) for h in year_hours(year)])
 
 
 def weather_matrix(weather, n_hours: int) -> np.ndarray:

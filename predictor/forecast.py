@@ -89,12 +89,12 @@ class ModelForecaster:
             for s, evs in by_sector.items():
                 F[s] = fz.sector_feature(evs)
                 has[s] = True
-        y = self.model.predict_hour(when, world.weather, F, has)
+        y = self.model.predict_hour(when, world.weather, F, has, world.holidays)
         return y, has
 
     def forecast(self, world, when: dt.datetime):
         y, has = self.predict_counts(world, when)
-        p = node_distribution(world.city, world.locale_counts, when)
+        p = node_distribution(world.city, world.locale_counts, when, world.schedules)
         return Forecast(
             eta=(y / 60.0).astype(np.float64),
             rho=p,

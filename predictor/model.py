@@ -94,10 +94,11 @@ class DemandModel:
             raise ConfigError(f"the model has no {name!r} network (train it with `surge predictor train`)")
         return self.norm.counts(predict(net, X, batch=int(self.meta.get("training", {}).get("eval_batch", 8192))))
 
-    def predict_hour(self, when: dt.datetime, weather, F: np.ndarray, has_event: np.ndarray) -> np.ndarray:
+    def predict_hour(self, when: dt.datetime, weather, F: np.ndarray, has_event: np.ndarray,
+                     holidays: frozenset[dt.date] | None = None) -> np.ndarray:
         """ŷ for every sector in the hour beginning ``when`` (event network where ``has_event``, else no-event)."""
         S = self.n_sectors
-        tf = np.repeat(temporal_features(when)[None, :], S, axis=0)
+        tf = np.repeat(temporal_features(when, holidays)[None, :], S, axis=0)
         wf = np.repeat(weather_at(weather, when)[None, :], S, axis=0)
         sectors = np.arange(S)
         y = self.predict_no_event(tf, wf, sectors)

@@ -54,7 +54,11 @@ class ListedWorld:
     """The stand-in worlds' common reading side: hourly counts, true rates and events held in lists.
 
     Subclasses set ``year``, ``events``, ``_rate`` and ``_counts`` and draw their own requests.
+    They keep the default calendar: US federal holidays and the built-in occupancy schedules.
     """
+
+    holidays = None
+    schedules = None
 
     def hour_index(self, when: dt.datetime) -> int:
         return (when.date() - dt.date(self.year, 1, 1)).days * 24 + when.hour

@@ -204,6 +204,16 @@ def test_base_profile_follows_the_real_data_shape(world: SyntheticWorld) -> None
     assert 0.9 * REF_RATE <= mean[19] <= 1.15 * REF_RATE
 
 
+def test_a_named_calendar_puts_its_holidays_on_the_sunday_profile() -> None:
+    from city.demand.profile import MONTH_FACTOR, day_factors
+
+    early_may = dt.date(2022, 5, 2)  # a UK bank holiday, a working Monday in the US
+    assert early_may in holiday_dates(2022, "GB") and early_may not in holiday_dates(2022)
+    row = early_may.timetuple().tm_yday - 1
+    np.testing.assert_allclose(day_factors(2022, holiday_dates(2022, "GB"))[row], PROFILE[6] * MONTH_FACTOR[4])
+    np.testing.assert_allclose(day_factors(2022)[row], PROFILE[0] * MONTH_FACTOR[4])
+
+
 def test_calibration_of_a_typical_weekday(world: SyntheticWorld) -> None:
     """The documented target: events are 15–25 % of citywide demand at 19 h on a typical Tue–Thu
     (attendance × trips per attendee × the fleet's share; see city.demand.attendance)."""

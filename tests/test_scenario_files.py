@@ -143,6 +143,26 @@ def test_invented_city_is_built_from_its_scenario_file(invented: Path) -> None:
     assert scen.schedules is not None and scen.schedules["hotel"]["sunday"][12] == 0.8
 
 
+def test_the_scenario_calendar_and_schedules_drive_the_world_and_the_predictor(invented: Path) -> None:
+    from city.calendar import holidays_for
+    from city.occupancy import occupancy, sector_distribution
+    from predictor.features import temporal_features
+
+    scen = load_scenario(str(invented))
+    world, city = scen.world, scen.city
+    state_only = set(holidays_for(2022, "US", "NY")) - set(holidays_for(2022, "US"))
+    assert state_only and state_only <= world.holidays
+    day = min(state_only)
+    assert temporal_features(dt.datetime.combine(day, dt.time(9)), world.holidays)[33] == 1.0
+    assert temporal_features(dt.datetime.combine(day, dt.time(9)))[33] == 0.0
+    pickup = np.asarray(city.pickup, bool)
+    own = sector_distribution(occupancy(world.locale_counts, 12, "sunday", scen.schedules), city.node_sector, city.n_sectors, pickup)
+    builtin = sector_distribution(occupancy(world.locale_counts, 12, "sunday"), city.node_sector, city.n_sectors, pickup)
+    sunday_noon = dt.datetime(2022, 6, 5, 12)
+    np.testing.assert_allclose(world.pickup_dist(sunday_noon), own)
+    assert not np.allclose(own, builtin)
+
+
 def test_surge_evaluate_runs_on_the_invented_city(invented: Path, capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
     out = tmp_path / "results.json"
     assert main(["evaluate", "--scenario", str(invented), "--hours", "19", "--seeds", "2", "--taxis", "4", "--minutes", "20",

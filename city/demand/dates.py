@@ -20,15 +20,17 @@ def evaluation_date(year: int) -> dt.date:
 
 
 @lru_cache(maxsize=None)
-def holiday_dates(year: int) -> frozenset[dt.date]:
-    """US federal holidays of ``year`` with their observed dates, from the ``holidays`` package.
+def holiday_dates(year: int, country: str = HOLIDAY_COUNTRY, subdiv: str | None = None) -> frozenset[dt.date]:
+    """Public holidays of ``year`` with their observed dates, from the ``holidays`` package.
 
-    They are the days that the real zone profile leaves out of its business
-    days, so the world gives them a Sunday profile.
+    US federal holidays by default: the days that the real zone profile leaves
+    out of its business days.  A scenario file's ``[holidays]`` names another
+    country or state.  The world gives them a Sunday profile.
     """
-    return frozenset(holidays_for(year, HOLIDAY_COUNTRY))
+    return frozenset(holidays_for(year, country, subdiv))
 
 
-def day_kind(date: dt.date) -> int:
-    """Profile row of a date: 0 … 6 for Monday … Sunday, holidays as Sunday (6)."""
-    return 6 if date in holiday_dates(date.year) else date.weekday()
+def day_kind(date: dt.date, holidays: frozenset[dt.date] | None = None) -> int:
+    """Profile row of a date: 0 … 6 for Monday … Sunday, holidays (default: US federal) as Sunday (6)."""
+    off = holiday_dates(date.year) if holidays is None else holidays
+    return 6 if date in off else date.weekday()

@@ -77,29 +77,34 @@ TILT = np.array([.8, .6, .3, 0, 0, 0, -.4, -1, -1, -1, -.6, -.3,
 WEEKEND_KERNEL = np.array([1, 2, 3, 2, 1]) / 9.0
 
 
-def day_factors(year: int) -> np.ndarray:
-    """``(days, 24)`` citywide base level of every hour of ``year``, relative to the reference point."""
+def day_factors(year: int, holidays: frozenset[dt.date] | None = None) -> np.ndarray:
+    """``(days, 24)`` citywide base level of every hour of ``year``, relative to the reference point.
+
+    ``holidays`` (default: US federal, :func:`~city.demand.dates.day_kind`) run on the Sunday row.
+    """
     days = (dt.date(year + 1, 1, 1) - dt.date(year, 1, 1)).days
     out = np.empty((days, 24))
     for d in range(days):
         date = dt.date(year, 1, 1) + dt.timedelta(days=d)
-        out[d] = PROFILE[day_kind(date)] * MONTH_FACTOR[date.month - 1]
+        out[d] = PROFILE[day_kind(date, holidays)] * MONTH_FACTOR[date.month - 1]
     return out
 
 
-def base_rate(year: int, weather: HourlyWeather, intensity: np.ndarray, tilt: np.ndarray, share: float = FLEET_SHARE) -> np.ndarray:
+def base_rate(year: int, weather: HourlyWeather, intensity: np.ndarray, tilt: np.ndarray, share: float = FLEET_SHARE,
+              holidays: frozenset[dt.date] | None = None) -> np.ndarray:
     """Expected requests per sector-hour without events: the real 19 h trips × share × profile × month × weather × sector.
 
     With the default share the reference point is :data:`REF_RATE` requests per hour.
     """
-    citywide = day_factors(year)
+    citywide = day_factors(year, holidays)
     days = citywide.shape[0]
     citywide = citywide.ravel() * weather_factor(weather) * REAL_TRIPS_19H * share
     shape = 1.0 + tilt[None, :] * np.tile(TILT, days)[:, None]
     return citywide[:, None] * intensity[None, :] * shape
 
 
-def profile_base_rate(year: int, weather: HourlyWeather, hourly: np.ndarray, share: float) -> np.ndarray:
+def profile_base_rate(year: int, weather: HourlyWeather, hourly: np.ndarray, share: float,
+                      holidays: frozenset[dt.date] | None = None) -> np.ndarray:
     """Base rate from a real zone profile: ``hourly`` ``(5, 24, S)`` trips per business day × share.
 
     Business days use their weekday's row; Saturdays, Sundays and holidays
@@ -113,7 +118,7 @@ def profile_base_rate(year: int, weather: HourlyWeather, hourly: np.ndarray, sha
     out = np.empty((days, 24, S))
     for d in range(days):
         date = dt.date(year, 1, 1) + dt.timedelta(days=d)
-        k = day_kind(date)
+        k = day_kind(date, holidays)
         row = hourly[k] if k < 5 else mean * (PROFILE[k] / weekday_mean)[:, None]
         out[d] = row * MONTH_FACTOR[date.month - 1]
     return out.reshape(days * 24, S) * weather_factor(weather)[:, None] * share

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from city.demand.climate import synthetic_weather
+from city.demand.dates import HOLIDAY_COUNTRY
 from city.demand.geography import find_anchors, locale_counts
 from city.demand.world import DemandWorld, HourTrips, check_seed_year
 from city.errors import ConfigError
@@ -49,6 +50,8 @@ class RecordedWorld(DemandWorld):
         venues: list[Venue] | tuple[Venue, ...] = (),
         weather: HourlyWeather | None = None,
         pois: Pois | None = None,
+        holidays: tuple[str, str | None] = (HOLIDAY_COUNTRY, None),
+        schedules: dict | None = None,
     ) -> None:
         from city.trips import hourly_counts, od_matrix
 
@@ -68,7 +71,7 @@ class RecordedWorld(DemandWorld):
         busy = busy / busy.mean() if busy.sum() > 0 else np.ones(S)
         anchors = find_anchors(city)
         locale, pois = locale_counts(city, pois, busy, anchors, np.random.default_rng([seed, 12]), notes)
-        super().__init__(city, year, seed, list(venues), list(events), weather, locale, pois, notes)
+        super().__init__(city, year, seed, list(venues), list(events), weather, locale, pois, notes, holidays=holidays, schedules=schedules)
 
         self._counts = counts
         self._counts.setflags(write=False)

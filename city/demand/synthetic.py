@@ -20,7 +20,7 @@ import numpy as np
 
 from city.demand.attendance import draw_attendance, event_trips, surges, write_events
 from city.demand.climate import synthetic_weather
-from city.demand.dates import day_kind
+from city.demand.dates import HOLIDAY_COUNTRY, day_kind
 from city.demand.geography import busyness, find_anchors, gravity_od, intensity_and_tilt, locale_counts
 from city.demand.profile import FLEET_SHARE, base_rate, profile_base_rate
 from city.demand.venues import make_venues, schedule
@@ -53,6 +53,8 @@ class SyntheticWorld(DemandWorld):
         demand_scale: float = 1.0,
         zone_profile: "ZoneProfile | None" = None,
         share: float = FLEET_SHARE,
+        holidays: tuple[str, str | None] = (HOLIDAY_COUNTRY, None),
+        schedules: dict | None = None,
     ) -> None:
         check_seed_year(seed, year)
         if not demand_scale > 0:
@@ -73,14 +75,14 @@ class SyntheticWorld(DemandWorld):
         specs = schedule(venues, year, np.random.default_rng([seed, 14]))
         events, specs = write_events(specs, venues, random.Random(f"surge-texts-{seed}"))
         events, attendance = draw_attendance(specs, events, venues, weather, seed)
-        super().__init__(city, year, seed, venues, events, weather, counts, pois, notes)
+        super().__init__(city, year, seed, venues, events, weather, counts, pois, notes, holidays=holidays, schedules=schedules)
 
         S = city.n_sectors
         if zone_profile is not None:
             if zone_profile.trips.shape[2] != S:
                 raise ConfigError(f"zone profile {zone_profile.source} has {zone_profile.trips.shape[2]} sectors, the city {S}")
             hourly = zone_profile.hourly()
-            self._base = profile_base_rate(year, weather, hourly.sum(axis=3), self.share) * self.demand_scale
+            self._base = profile_base_rate(year, weather, hourly.sum(axis=3), self.share, self.holidays) * self.demand_scale
             self._profile_beta = zone_profile.beta()
             daily = hourly.sum(axis=(0, 1))
             self.intensity = daily.sum(axis=1) / daily.sum()
@@ -89,7 +91,7 @@ class SyntheticWorld(DemandWorld):
             self.base_source = f"zone profile {zone_profile.source} × share {self.share:g}"
             notes.append(f"base demand: {self.base_source}")
         else:
-            self._base = base_rate(year, weather, self.intensity, tilt, self.share) * self.demand_scale
+            self._base = base_rate(year, weather, self.intensity, tilt, self.share, self.holidays) * self.demand_scale
             self._profile_beta = None
             self._static_beta = gravity_od(city, self.intensity)
             self.base_source = f"real hourly profile (city.demand.profile.PROFILE) × share {self.share:g} × sector intensity"
@@ -130,7 +132,7 @@ class SyntheticWorld(DemandWorld):
         """β of the base demand at hour row ``h``: the zone profile's weekday-hour, or the gravity model."""
         if self._profile_beta is None:
             return self._static_beta
-        kind = day_kind(self.when(h).date())
+        kind = day_kind(self.when(h).date(), self.holidays)
         beta = self._profile_beta[kind, h % 24] if kind < 5 else self._profile_beta[:, h % 24].mean(axis=0)
         return beta
 
@@ -251,6 +253,8 @@ def synthetic_world(
     demand_scale: float = 1.0,
     zone_profile: "ZoneProfile | None" = None,
     share: float = FLEET_SHARE,
+    holidays: tuple[str, str | None] = (HOLIDAY_COUNTRY, None),
+    schedules: dict | None = None,
 ) -> SyntheticWorld:
     """Generate a year of demand on ``city``; the same arguments always give the same world.
 
@@ -274,5 +278,11 @@ def synthetic_world(
         The fleet's share of the real market (default :data:`~city.demand.profile.FLEET_SHARE`, ≈ 1.7 %):
         it scales the zone profile's trips, or the real profile's 19 h level on a map without one,
         and the event-goers' trips.
+    holidays : (country, subdivision)
+        Whose public holidays run on a Sunday profile (the ``holidays`` package); US federal by default.
+    schedules : dict, optional
+        Occupancy schedules (:func:`city.occupancy.read_occupancy_csv`) for the assignment of
+        requests to intersections; the built-in DOE ones otherwise.
     """
-    return SyntheticWorld(city, year=year, seed=seed, weather=weather, pois=pois, demand_scale=demand_scale, zone_profile=zone_profile, share=share)
+    return SyntheticWorld(city, year=year, seed=seed, weather=weather, pois=pois, demand_scale=demand_scale, zone_profile=zone_profile,
+                          share=share, holidays=holidays, schedules=schedules)

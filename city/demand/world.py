@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from city.demand.dates import HOLIDAY_COUNTRY, holiday_dates
 from city.errors import ConfigError
 from city.events import Event, Venue
 from city.graph import City
@@ -70,6 +71,12 @@ class DemandWorld:
         The points of interest behind ``locale_counts``.
     notes : list of str
         Choices made for the inputs (synthesised restaurants, synthetic weather …).
+    holidays : frozenset of date
+        The year's public holidays (a scenario's ``[holidays]``; US federal by default). They run on
+        a Sunday profile, and the predictor's holiday flag reads them.
+    schedules : dict or None
+        Occupancy schedules of a scenario's ``[occupancy]`` file, in the shape of
+        :data:`city.occupancy.SCHEDULES`; ``None`` for the built-in ones.
     """
 
     def __init__(
@@ -83,6 +90,9 @@ class DemandWorld:
         locale_counts: np.ndarray,
         pois: Pois | None,
         notes: list[str],
+        *,
+        holidays: tuple[str, str | None] = (HOLIDAY_COUNTRY, None),
+        schedules: dict | None = None,
     ) -> None:
         if weather.year != year or len(weather.temp_f) != hours_in_year(year):
             raise ConfigError(f"weather covers {weather.year} with {len(weather.temp_f)} hours; the world needs {year} ({hours_in_year(year)} hours)")
@@ -95,6 +105,8 @@ class DemandWorld:
         self.locale_counts = np.asarray(locale_counts, dtype=np.float64)
         self.pois = pois
         self.notes = notes
+        self.holidays = holiday_dates(self.year, *holidays)
+        self.schedules = schedules
         self.n_hours = hours_in_year(year)
         self._eligible = np.asarray(city.pickup, dtype=bool)
         # Eligible nodes grouped by sector, for drawing intersections by inverse CDF.
@@ -146,7 +158,7 @@ class DemandWorld:
         """O(j, h) normalised within sectors, and its cumulative sum over ``_node_order``."""
         key = (day_type(when.date()), when.hour)
         if key not in self._dist_cache:
-            weights = occupancy(self.locale_counts, when.hour, key[0])
+            weights = occupancy(self.locale_counts, when.hour, key[0], self.schedules)
             p = sector_distribution(weights, self.city.node_sector, self.city.n_sectors, self._eligible)
             self._dist_cache[key] = (p, np.cumsum(p[self._node_order]))
         return self._dist_cache[key]
