@@ -17,7 +17,7 @@ import warnings
 from pathlib import Path
 
 from city.errors import SurgeError
-from coordinator.args import hour, iso_date, positive, rollout_options, scenario_args
+from coordinator.args import hour, iso_date, positive, rollout_options, scenario_args, share
 
 
 # --------------------------------------------------------------------- evaluate
@@ -219,14 +219,25 @@ def _demand_plot(rows: list[dict], args: argparse.Namespace) -> None:
 
 
 # ------------------------------------------------------------------------- demo
+#: The demo's fleet: as many agent processes as a laptop holds (about 215 MB each).
+DEMO_TAXIS = 40
+
+
 def add_demo(sub: argparse._SubParsersAction) -> None:
+    from city.demand.profile import FLEET_SHARE
+
+    # The evaluation's share for 100 taxis scaled to the demo's fleet, so that each taxi meets the
+    # evaluation's demand: stressed, not swamped (at the full share 40 taxis serve about a third).
+    demo_share = FLEET_SHARE * DEMO_TAXIS / 100
     p = sub.add_parser("demo", help="the local multi-process fleet at the 5 pm event surge on the embedded synthetic city, "
                                      "checked decision for decision against the in-process run, then surge against greedy")
-    p.add_argument("--taxis", type=positive, default=40, help="taxis, one agent process each (about 215 MB each)")
+    p.add_argument("--taxis", type=positive, default=DEMO_TAXIS, help="taxis, one agent process each (about 215 MB each)")
     p.add_argument("--minutes", type=positive, default=30)
     p.add_argument("--hour", type=hour, default=17, help="episode hour (default: the 5 pm event surge)")
     p.add_argument("--out", default="demo-out", help="directory for the run's JSON, the map and the GIF")
     p.add_argument("--json", default=None, help="write the run's result here (default: OUT/demo.json)")
+    p.add_argument("--share", type=share, default=demo_share,
+                   help=f"the fleet's share of real demand (default {demo_share:.5f}: the 100-taxi evaluation's demand per taxi)")
     p.add_argument("--insecure", action="store_true", help="run the bus without TLS or access control")
     p.set_defaults(func=cmd_demo)
 
@@ -240,7 +251,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     path = args.json or str(out / "demo.json")
     ns = argparse.Namespace(
         run="demo", scenario="synthetic", data=None, date="2022-11-17", hour=args.hour, minutes=args.minutes, taxis=args.taxis,
-        seed=0, world_seed=0, policy="surge", forecast="true-rate", model=None, horizon=None, samples=None,
+        seed=0, world_seed=0, policy="surge", forecast="previous-hour", model=None, horizon=None, samples=None,
         deadline=30.0, join_timeout=120.0, minute_seconds=0.0, predictor=False, json=path, check=True,
         certs=None, insecure=args.insecure,
     )
