@@ -160,12 +160,24 @@ def od_matrix(trips: TripTable, n_sectors: int, months: Iterable[int] | None = N
     only the trips requested in those months, e.g. the training months, so
     that β holds nothing from the months a model is tested on.
     """
-    pu = trips.pickup_sector.astype(np.int64)
-    do = np.asarray(trips.dropoff_sector, dtype=np.int64)
+    pu, do = trips.pickup_sector, trips.dropoff_sector
     if months is not None:
-        month = trips.request_time.astype("datetime64[M]").astype(np.int64) % 12 + 1
-        keep = np.isin(month, np.asarray(list(months), dtype=np.int64))
+        keep = in_months(trips, months)
         pu, do = pu[keep], do[keep]
+    return od_frequencies(pu, do, n_sectors)
+
+
+def in_months(trips: TripTable, months: Iterable[int], year: int | None = None) -> np.ndarray:
+    """Which trips were requested in ``months`` (1 = January), of ``year`` only if given."""
+    when = trips.request_time.astype("datetime64[M]").astype(np.int64)
+    keep = np.isin(when % 12 + 1, np.asarray(list(months), dtype=np.int64))
+    return keep if year is None else keep & (when // 12 + 1970 == year)
+
+
+def od_frequencies(pickup_sector: np.ndarray, dropoff_sector: np.ndarray, n_sectors: int) -> np.ndarray:
+    """Relative frequency of each drop-off sector given the pickup sector; a row without trips is uniform."""
+    pu = np.asarray(pickup_sector, dtype=np.int64)
+    do = np.asarray(dropoff_sector, dtype=np.int64)
     counts = np.bincount(pu * n_sectors + do, minlength=n_sectors * n_sectors).reshape(n_sectors, n_sectors).astype(np.float64)
     totals = counts.sum(axis=1, keepdims=True)
     return np.where(totals > 0, counts / np.maximum(totals, 1.0), 1.0 / n_sectors)

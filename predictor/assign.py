@@ -31,24 +31,16 @@ def node_distribution(city, locale_counts: np.ndarray, when: dt.datetime, schedu
     return sector_distribution(weights, np.asarray(city.node_sector), int(city.n_sectors), np.asarray(city.pickup, bool))
 
 
-def od_frequencies(pickup_sector: np.ndarray, dropoff_sector: np.ndarray, n_sectors: int) -> np.ndarray:
-    counts = np.bincount(
-        np.asarray(pickup_sector, np.int64) * n_sectors + np.asarray(dropoff_sector, np.int64), minlength=n_sectors * n_sectors
-    ).reshape(n_sectors, n_sectors).astype(np.float64)
-    totals = counts.sum(axis=1, keepdims=True)
-    return np.where(totals > 0, counts / np.maximum(totals, 1.0), 1.0 / n_sectors)
-
-
 def estimate_beta(world, *, days: int = 28, seed: int = 0, trips=None) -> tuple[np.ndarray, dict]:
     """β ``(S, S)`` (rows sum to 1) and a description of where it came from."""
+    from city.trips import in_months, od_frequencies  # pyarrow: only where β is estimated, never in an agent
+
     city = world.city
     S = int(city.n_sectors)
     year = int(world.year)
     if trips is not None:
-        t = np.asarray(trips.request_time).astype("datetime64[m]")
-        keep = (t >= np.datetime64(f"{year}-01-01", "m")) & (t < np.datetime64(dt.date(year, TRAIN_MONTHS + 1, 1).isoformat(), "m"))
-        pu, do = np.asarray(trips.pickup_sector)[keep], np.asarray(trips.dropoff_sector)[keep]
-        beta = od_frequencies(pu, do, S)
+        keep = in_months(trips, range(1, TRAIN_MONTHS + 1), year)
+        beta = od_frequencies(trips.pickup_sector[keep], trips.dropoff_sector[keep], S)
         return beta, {"source": "trip table", "trips": int(keep.sum()), "trips_outside_training_months": int((~keep).sum()), "months": f"1-{TRAIN_MONTHS}"}
     first = dt.date(year, 1, 1)
     n_train_days = (dt.date(year, TRAIN_MONTHS + 1, 1) - first).days

@@ -411,6 +411,7 @@ def test_model_forecasts_from_the_events_it_was_trained_with(world: TinyWorld, t
     class Quiet:  # the served world: same sectors and weather, no events of its own
         def __init__(self) -> None:
             self.city, self.weather, self.locale_counts, self.events = city, world.weather, world.locale_counts, []
+            self.holidays, self.schedules = world.holidays, world.schedules
 
     events = tmp_path / "events.json"
     events.write_text(json.dumps([{"id": "gig", "title": "Sold-out stadium concert", "description": "Huge crowds expected", "category": "concerts",
