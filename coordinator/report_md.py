@@ -9,6 +9,7 @@ ratios to greedy and to the oracle are the comparable figures.
 from __future__ import annotations
 
 import datetime as dt
+import json
 import math
 from pathlib import Path
 
@@ -155,13 +156,27 @@ def _provenance(scen) -> list[str]:
     return lines
 
 
+def _model_lines(run) -> list[str]:
+    """Which predictor ``surge`` planned with: its directory, widths and where each network stopped."""
+    meta = json.loads((run.model / "model.json").read_text())
+    how = "reused (`--model`)" if run.model_dir is not None else "trained by this run"
+    lines = [f"The model: `{run.model}`, {how}. Early stopping on the validation months; epoch cap "
+             f"{meta['training']['epochs']} (event-sector networks {meta['training'].get('event_epochs') or meta['training']['epochs']}).", "",
+             "| network | hidden widths | epochs run | best epoch | stopped early |", "|---|---|---|---|---|"]
+    for name, net in meta["networks"].items():
+        widths = "×".join(str(w) for w in net["hidden"])
+        lines.append(f"| {name} | {widths} | {net['epochs_run']} | {net['best_epoch']} | {'yes' if net['stopped_early'] else 'no (cap)'} |")
+    return lines
+
+
 def write_report(run, scen, docs: dict, pe: dict | None) -> Path:
     """Figures and ``REPORT.md`` in ``run.out``; returns the report's path."""
     out = run.out
     main = complete_seeds(docs["main"])
     lines = [f"# surge reproduce: {run.scenario}", "",
-             f"Written {dt.datetime.now(dt.timezone.utc):%Y-%m-%d %H:%M} UTC by `surge reproduce --scenario {run.scenario}"
-             + (f" --data {run.data}" if run.data else "") + f" --out {out}`; protocol: "
+             f"Written {dt.datetime.now(dt.timezone.utc):%Y-%m-%d %H:%M} UTC by `"
+             + (run.command or f"surge reproduce --scenario {run.scenario}" + (f" --data {run.data}" if run.data else "") + f" --out {out}")
+             + "`; protocol: "
              + ", ".join(f"{k}={v}" for k, v in vars(run.protocol).items()) + ".",
              "Every number below is computed from the results files beside this report (`surge.results/1`).", ""]
     info = ("`surge` with the trained model" if run.forecast == "model"
@@ -230,7 +245,7 @@ def write_report(run, scen, docs: dict, pe: dict | None) -> Path:
     if not pe:
         lines.append("Not run in this protocol (no predictor).")
     else:
-        lines += ["![predictor PE](fig-predictor-pe.png)", ""]
+        lines += _model_lines(run) + ["", "![predictor PE](fig-predictor-pe.png)", ""]
         lines += _table(["hour", "event NN (ours)", "standard NN", "previous hour", "n"],
                         [[f"{r['hour']}h", f"{100 * r['pe_event_nn']:.1f} %", f"{100 * r['pe_standard_nn']:.1f} %",
                           f"{100 * r['pe_previous_hour']:.1f} %", str(r["n"])] for r in pe["rows"]])

@@ -87,6 +87,8 @@ class Run:
     data: str | None
     protocol: Protocol
     model_dir: Path | None = None
+    #: The command line as the user gave it, for the report.
+    command: str | None = None
     log: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
 
@@ -256,6 +258,10 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     model = Path(args.model) if args.model else None
     if model is not None and not (model / "model.json").exists():
         raise ConfigError(f"--model {model}: no model.json there (train one with surge predictor train)")
-    run = Run(out=Path(args.out), scenario=args.scenario, data=args.data, protocol=replace(protocol, jobs=args.jobs), model_dir=model)
+    flags = [("--data", args.data), ("--out", args.out), ("--quick", args.quick), ("--smoke", args.smoke),
+             ("--jobs", args.jobs if args.jobs != 1 else None), ("--model", args.model)]
+    command = " ".join(["surge reproduce --scenario", args.scenario] + [f if v is True else f"{f} {v}" for f, v in flags if v])
+    run = Run(out=Path(args.out), scenario=args.scenario, data=args.data, protocol=replace(protocol, jobs=args.jobs), model_dir=model,
+              command=command)
     print(reproduce(run))
     return 0
