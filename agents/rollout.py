@@ -126,13 +126,18 @@ def base_controls(city: City, config: RolloutConfig, obs: Observation) -> np.nda
 
 
 def prepare_step(city: City, config: RolloutConfig, obs: Observation, tables: DemandTables, minute0: int,
-                 shortcuts: Shortcuts | None = None) -> StepContext:
-    """The shared per-minute context: the base policy's joint control and, with the shortcut, the nearest-request lists."""
+                 shortcuts: Shortcuts | None = None, base: np.ndarray | None = None) -> StepContext:
+    """The shared per-minute context: the base policy's joint control and, with the shortcut, the nearest-request lists.
+
+    ``base`` is that joint control when it is already known (an agent gets
+    it with the state), so that it is computed once per minute, not per agent.
+    """
     sc = shortcuts or Shortcuts()
     near = near_d = None
     if sc.minute_lists and obs.req_pickup.size:
         near, near_d = K.nearest_lists(city.dist, np.ascontiguousarray(obs.req_pickup, dtype=np.int32), MINUTE_NEAR_K)
-    return StepContext(city, config, obs, base_controls(city, config, obs), tables, int(minute0), sc, near, near_d)
+    base = base_controls(city, config, obs) if base is None else np.asarray(base, dtype=np.int32)
+    return StepContext(city, config, obs, base, tables, int(minute0), sc, near, near_d)
 
 
 def candidate_controls(city: City, obs: Observation, agent: int) -> np.ndarray:
