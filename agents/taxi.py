@@ -129,7 +129,7 @@ class TaxiAgent:
             from city.scenario import load_city
 
             try:
-                self._cities[where] = load_city(*where)
+                self._cities[where] = load_city(*where, mmap=True)  # the matrices shared with every agent on this host
             except Exception as exc:
                 self._cities[where] = exc
         city = self._cities[where]
