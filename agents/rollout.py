@@ -361,13 +361,15 @@ def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False) -> int
     return int(inp.cands[int(np.argmin(totals))])
 
 
-def warm_up(city: City | None = None, config: RolloutConfig | None = None) -> None:
+def warm_up(city: City | None = None, config: RolloutConfig | None = None, serial: bool = False) -> None:
     """Plan once on a made-up minute with two samples: loads the compiled kernels, or compiles them on a fresh checkout.
 
     Launchers call it before spawning agents, so that numba compiles once into
     its on-disk cache instead of in every agent at the same time.  Any city
     serves (the embedded synthetic one by default): the kernels depend on
-    types, not on the map.
+    types, not on the map.  ``serial`` plans in the calling thread and leaves
+    the parallel kernel unloaded: its OpenMP runtime must not be running in a
+    process that forks (:mod:`agents.preload`).
     """
     if city is None:
         from city.scenario import load_city
@@ -380,7 +382,7 @@ def warm_up(city: City | None = None, config: RolloutConfig | None = None) -> No
     cfg = replace(config, samples=2)
     obs = Observation(t=0, pos=nodes[:1], tau=np.zeros(1, np.int32), dest=np.full(1, -1, np.int32), req_index=np.zeros(1, np.int64),
                       req_pickup=nodes[:1], req_dropoff=nodes[-1:], req_entry=np.zeros(1, np.int32))
-    plan_agent(prepare_step(city, cfg, obs, DemandTables.build(city, fc, cfg.ce, cfg.seed), 0), np.empty(0, np.int32), 0)
+    _plan(prepare_step(city, cfg, obs, DemandTables.build(city, fc, cfg.ce, cfg.seed), 0), np.empty(0, np.int32), 0, serial)
 
 
 class RolloutPolicy(Policy):

@@ -40,6 +40,7 @@ from bus.session import Inbox, SessionArgs, open_session, publisher
 from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
 from city.errors import ConfigError
 from city.sim import FleetSim, Observation, Requests, decisions_hash
+from coordinator.metrics import Counted, Traffic
 
 
 @dataclass(frozen=True)
@@ -131,6 +132,7 @@ class Coordinator:
         self.rejected = Rejections(log)
         #: The minute being played, against which proposed controls are checked.
         self.obs: Observation | None = None
+        self.traffic = Traffic()
 
     # ------------------------------------------------------------------ inbox
     def _handle(self, item: tuple[str, str, object], want: set[tuple[int, int]] | None = None) -> Control | None:
@@ -162,6 +164,7 @@ class Coordinator:
             finally:
                 payload.drop()  # type: ignore[attr-defined]  # ends the asker's get() now, not when the query is collected
         elif tag == "control":
+            self.traffic.received(payload)  # type: ignore[arg-type]
             c = check_control(decode(payload, Control, key), key, self.bounds)  # type: ignore[arg-type]
             if c.by != "agent":
                 raise WireError(f"{key}: a proposed control must say by='agent', not {c.by!r}")
@@ -207,10 +210,11 @@ class Coordinator:
 
     def _run(self, session, inbox: Inbox) -> dict:  # noqa: ANN001
         cfg, keys = self.cfg, self.keys
-        pub_state, pub_forecast, pub_stop = (publisher(session, k) for k in (keys.state, keys.forecast, keys.stop))
-        turn_pub = {a: publisher(session, keys.turn(a)) for a in range(cfg.taxis)}
-        commit_pub = {a: publisher(session, keys.committed(a)) for a in range(cfg.taxis)}
+        pub_state, pub_forecast, pub_stop = (Counted(publisher(session, k), self.traffic) for k in (keys.state, keys.forecast, keys.stop))
+        turn_pub = {a: Counted(publisher(session, keys.turn(a)), self.traffic) for a in range(cfg.taxis)}
+        commit_pub = {a: Counted(publisher(session, keys.committed(a)), self.traffic) for a in range(cfg.taxis)}
         self._wait_for_agents(inbox)
+        joined_at = time.time()
         controls = np.zeros((cfg.minutes, cfg.taxis), dtype=np.int32)
         costs, step_s, plan_s = [], [], []
         planned = np.zeros(cfg.taxis, dtype=np.int64)
@@ -275,6 +279,7 @@ class Coordinator:
             "stale_messages": self.stale,
             "rejected_messages": dict(self.rejected.counts),
             "step_seconds": {"median": float(np.median(step_s)), "max": float(np.max(step_s))},
+            "minute_seconds": step_s,
             "agent_plan_seconds": {"median": float(np.median(plan_s)) if plan_s else None,
                                    "max": float(np.max(plan_s)) if plan_s else None},
             "agent_peak_rss_mb": float(rss.max()),
@@ -282,6 +287,8 @@ class Coordinator:
             "critical_path": [len(w) for w in minute_waves],
             "free_per_minute": [sum(len(wave["agents"]) for wave in w) for w in minute_waves],
             "waves": minute_waves,
+            "joined_at": joined_at,
+            "traffic": self.traffic.summary(cfg.minutes),
         }
 
     def _forecast(self, session, inbox: Inbox, hour: int) -> bytes:  # noqa: ANN001
