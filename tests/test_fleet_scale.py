@@ -1,0 +1,95 @@
+"""Lean agents: forked from a preloaded parent with no zenoh session, they open their own; the city is mapped, not read; the bench reports.
+
+The fork server of :func:`coordinator.fleet.agent_context` imports
+:mod:`agents.preload` and then forks every agent; zenoh must work in the
+children, each with its own session opened after the fork.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from bus.router import free_tcp_port, router_main, wait_for_tcp
+from bus.session import SessionArgs, open_session
+from city.scenario import load_city
+from coordinator.fleet import agent_context
+
+pytestmark = pytest.mark.usefixtures("compiled_kernels")
+
+
+def _forked_agent(endpoint: str, key: str, ready: str) -> None:
+    """In a forked child: a session of its own, waiting for the test to listen, then one message about itself."""
+    from agents.rollout import warm_up
+
+    warm_up()  # the parallel kernel, loaded after the fork
+    with open_session(SessionArgs(mode="client", connect=[endpoint])) as s:
+        while not list(s.get(ready, timeout=2.0)):
+            pass
+        s.put(key, json.dumps({"pid": os.getpid(), "parent": os.getppid(), "preloaded": "agents.preload" in sys.modules,
+                               "torch": "torch" in sys.modules, "scipy.sparse": "scipy.sparse.csgraph" in sys.modules}))
+
+
+def test_agents_forked_from_the_preloaded_server_use_zenoh() -> None:
+    import multiprocess as mp
+
+    port = free_tcp_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    router = mp.get_context("spawn").Process(target=router_main, args=(SessionArgs(mode="router", listen=[endpoint]),))
+    router.start()
+    ctx = agent_context()
+    agents = [ctx.Process(target=_forked_agent, args=(endpoint, f"fork-test/said/{i}", "fork-test/ready")) for i in range(2)]
+    try:
+        wait_for_tcp("127.0.0.1", port, 30)
+        got: queue.SimpleQueue = queue.SimpleQueue()
+        with open_session(SessionArgs(mode="client", connect=[endpoint])) as s:
+            sub = s.declare_subscriber("fork-test/said/*", lambda x: got.put(json.loads(x.payload.to_bytes())))
+            ready = s.declare_queryable("fork-test/ready", lambda q: (q.reply(q.key_expr, b"yes"), q.drop()))
+            for p in agents:
+                p.start()
+            said = [got.get(timeout=120) for _ in agents]
+            sub.undeclare()
+            ready.undeclare()
+        for p in agents:
+            p.join(30)
+    finally:
+        for p in [*agents, router]:
+            if p.is_alive():
+                p.terminate()
+            p.join(10)
+    assert [p.exitcode for p in agents] == [0, 0]
+    assert {m["pid"] for m in said} == {p.pid for p in agents}
+    assert all(m["parent"] != os.getpid() for m in said) and len({m["parent"] for m in said}) == 1  # forked by the one server
+    assert all(m["preloaded"] and not m["torch"] and not m["scipy.sparse"] for m in said)
+
+
+def test_a_mapped_city_is_the_read_one() -> None:
+    read, mapped = load_city("synthetic"), load_city("synthetic", mmap=True)
+    for name in ("xy", "indptr", "indices", "node_sector", "sector_adj", "dist", "next_hop", "dist_m"):
+        a, b = getattr(read, name), getattr(mapped, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b), name
+        assert isinstance(b.base, np.memmap) and b.flags.writeable, name  # pages of the file, typed as numba expects
+    assert np.array_equal(mapped.dist_t, read.dist.T) and mapped.dist_t.flags.c_contiguous
+
+
+def test_bench_fleet_prints_and_writes_every_figure(tmp_path: Path) -> None:
+    out = tmp_path / "fleet.json"
+    run = subprocess.run([sys.executable, "-m", "coordinator.cli", "bench", "fleet", "--taxis", "3", "--minutes", "3", "--forecast",
+                          "true-rate", "--samples", "20", "--horizon", "4", "--insecure", "--hosts", "2", "--json", str(out)],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    rep = json.loads(out.read_text())
+    assert rep["same_decisions"] and rep["fallbacks"] == 0
+    assert rep["memory"]["agents_measured"] == 3 and rep["memory"]["agents_pss_mb"] > 0
+    assert rep["ready_seconds"] > 0 and rep["traffic"]["messages_per_minute"] > 0
+    assert len(rep["critical_path"]) == 3 and set(rep["projected_minute_seconds_median"]) == {"2", "one per agent"}
+    for line in ("decisions identical", "median minute: distributed", "agents' memory", "all agents ready", "projected median minute"):
+        assert line in run.stdout, line
