@@ -198,6 +198,10 @@ def _print_result(result: dict, path: str | None) -> None:
     plan = result["agent_plan_seconds"]["median"]
     print(f"  minute wall time median {result['step_seconds']['median']:.3f} s, max {result['step_seconds']['max']:.3f} s; "
           f"agent plan median {plan if plan is None else f'{plan:.3f} s'}; agent peak RSS {result['agent_peak_rss_mb']:.0f} MB")
+    if result.get("critical_path"):
+        print(f"  turns in dependency waves: median {np.median(result['critical_path']):g} waves a minute for a median "
+              f"{np.median(result['free_per_minute']):g} free taxis (the critical path; {result['traffic']['messages_per_minute']:.0f} "
+              f"messages a minute through the coordinator)")
     print(f"  decisions sha256 {result['decisions_sha256']}")
     if path:
         Path(path).write_text(json.dumps(result, indent=1))
