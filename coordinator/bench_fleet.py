@@ -13,8 +13,10 @@ in-process with strictly sequential turns, and reports:
 - the messages and payload bytes through the coordinator per minute (the
   agents talk only to it);
 - each minute's critical path (its number of waves) and the minute projected
-  for the same agents on more hosts (:func:`coordinator.metrics.project_minutes`),
-  from each agent's planning time alone in the sequential run.
+  for the same agents on more hosts like this one
+  (:func:`coordinator.metrics.project_minutes`): each wave's measured time
+  split by the busiest host's share of its agents, never below its slowest
+  agent planning alone in the sequential run.
 
 It prints and writes JSON; it asserts nothing.
 """
@@ -104,8 +106,8 @@ def sequential_in_process(cfg: FleetConfig) -> dict:
 
 def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: list[int]) -> dict:
     """The benchmark's figures from the two runs (see the module docstring)."""
-    planning = [sum(max((p for p in w["plan_s"] if p is not None), default=0.0) for w in minute) for minute in dist["waves"]]
-    overhead = [max(0.0, m - p) for m, p in zip(dist["minute_seconds"], planning)]
+    in_waves = [sum(w["seconds"] for w in minute) for minute in dist["waves"]]
+    overhead = [max(0.0, m - w) for m, w in zip(dist["minute_seconds"], in_waves)]
     projected = {str(h): project_minutes(dist["waves"], seq["plan_s"], overhead, cfg.taxis, h) for h in hosts}
     projected["one per agent"] = project_minutes(dist["waves"], seq["plan_s"], overhead, cfg.taxis, None)
     d_med, s_med = median(dist["minute_seconds"]), median(seq["minute_seconds"])
@@ -126,7 +128,7 @@ def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: l
         "projected_minute_seconds_median": {h: median(v) for h, v in projected.items()},
         "per_minute": [{"t": t, "free": dist["free_per_minute"][t], "critical_path": dist["critical_path"][t],
                         "distributed_s": dist["minute_seconds"][t], "sequential_s": seq["minute_seconds"][t],
-                        "coordinator_overhead_s": overhead[t], **{f"projected_{h}_s": v[t] for h, v in projected.items()}}
+                        "outside_waves_s": overhead[t], **{f"projected_{h}_s": v[t] for h, v in projected.items()}}
                        for t in range(cfg.minutes)],
     }
 

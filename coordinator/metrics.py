@@ -56,33 +56,39 @@ def host_of(agent: int, taxis: int, hosts: int) -> int:
 
 def project_minutes(waves: list[list[dict]], plan_s: dict[tuple[int, int], float], overhead_s: list[float], taxis: int,
                     hosts: int | None) -> list[float]:
-    """Each minute's projected wall time with the agents on ``hosts`` hosts (``None``: one host per agent).
+    """Each minute's projected wall time with the agents on ``hosts`` hosts like this one (``None``: one host per agent).
 
-    A host plans its agents of a wave one after another, each in the time it
-    took alone on this machine (``plan_s[(t, agent)]``); a wave ends when its
-    slowest host does; the waves of a minute follow each other; and the
-    coordinator's own share of the minute (``overhead_s[t]``: state, base
-    controls, waves, messages, the simulator step) stays as measured.
+    Anchored on the run measured here, on one host: a wave's agents on one
+    host share its cores, so a host's part of a wave takes the wave's measured
+    time in proportion to the wave's agents it holds, but never less than
+    the slowest of them planning alone (``plan_s``, from the sequential run).
+    The waves of a minute follow each other, and the rest of the minute
+    (``overhead_s[t]``: the state, base controls, waves, the simulator step)
+    stays as measured.  With ``hosts=1`` this gives back the measured minute
+    (or the sequential agents' time, when that is longer).
 
     Parameters
     ----------
     waves : list of list of dict
-        Per minute, its waves as the coordinator reports them (``agents``).
+        Per minute, its waves as the coordinator reports them (``agents`` and ``seconds``).
     plan_s : dict
         Seconds each ``(minute, agent)`` took to plan alone.
     overhead_s : list of float
-        Per minute, the seconds that are not planning.
+        Per minute, the seconds outside the waves.
     taxis, hosts : int
     """
     out = []
     for t, minute in enumerate(waves):
         total = overhead_s[t]
         for wave in minute:
-            load: dict[int, float] = {}
-            for a in wave["agents"]:
+            agents = wave["agents"]
+            per_host: dict[int, int] = {}
+            for a in agents:
                 h = a if hosts is None else host_of(a, taxis, hosts)
-                load[h] = load.get(h, 0.0) + plan_s.get((t, a), 0.0)
-            total += max(load.values(), default=0.0)
+                per_host[h] = per_host.get(h, 0) + 1
+            share = max(per_host.values(), default=0) / max(len(agents), 1)
+            alone = max((plan_s.get((t, a), 0.0) for a in agents), default=0.0)
+            total += max(wave["seconds"] * share, alone)
         out.append(total)
     return out
 

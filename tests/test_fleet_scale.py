@@ -93,3 +93,14 @@ def test_bench_fleet_prints_and_writes_every_figure(tmp_path: Path) -> None:
     assert len(rep["critical_path"]) == 3 and set(rep["projected_minute_seconds_median"]) == {"2", "one per agent"}
     for line in ("decisions identical", "median minute: distributed", "agents' memory", "all agents ready", "projected median minute"):
         assert line in run.stdout, line
+
+
+def test_projection_splits_each_wave_over_the_hosts_and_keeps_its_slowest_agent() -> None:
+    from coordinator.metrics import project_minutes
+
+    waves = [[{"agents": [0, 1, 2, 3], "seconds": 2.0}, {"agents": [3], "seconds": 0.5}]]
+    alone = {(0, 0): 0.3, (0, 1): 0.3, (0, 2): 0.3, (0, 3): 0.6}
+    one, two, each = (project_minutes(waves, alone, [0.1], 4, h)[0] for h in (1, 2, None))
+    assert one == pytest.approx(0.1 + 2.0 + 0.6)  # the measured waves; the lone agent's wave no faster than it alone
+    assert two == pytest.approx(0.1 + 1.0 + 0.6)  # two agents of the first wave on each host
+    assert each == pytest.approx(0.1 + 0.6 + 0.6)  # one agent a host: the slowest agent alone
