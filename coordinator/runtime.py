@@ -361,9 +361,12 @@ class Coordinator:
 
 
 def _agents(ids: set[int]) -> str:
-    """``agent 3`` or ``agents 3, 5``, for a log line."""
+    """``agent 3``, ``agents 3, 5`` or ``agents 0, 1, … and 90 more``: a log line stays one short line."""
     ids_ = sorted(ids)
-    return f"agent {ids_[0]}" if len(ids_) == 1 else f"agents {', '.join(map(str, ids_))}"
+    if len(ids_) == 1:
+        return f"agent {ids_[0]}"
+    more = f" and {len(ids_) - 10} more" if len(ids_) > 10 else ""
+    return f"agents {', '.join(map(str, ids_[:10]))}{more}"
 
 
 def coordinator_main(config: FleetConfig, bus: SessionArgs, result_path: str | None = None) -> dict:
