@@ -16,5 +16,7 @@ from __future__ import annotations
 
 import agents.taxi  # noqa: F401  # the agent's imports, once
 from agents.rollout import warm_up
+from city.scenario import load_city
 
-warm_up(serial=True)
+# Any city types the kernels alike; a mapped one leaves no matrices in the heap the agents inherit.
+warm_up(load_city("synthetic", mmap=True), serial=True)
