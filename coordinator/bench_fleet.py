@@ -7,8 +7,8 @@ in-process with strictly sequential turns, and reports:
 - whether the decisions are identical;
 - the median minute of each, and their ratio;
 - the agents' total memory as PSS (proportional set size: a page shared by
-  ``k`` processes counts ``1/k`` to each), at its peak, sampled about once a
-  second, and the system memory in use at that peak against before launch;
+  ``k`` processes counts ``1/k`` to each), at its peak, sampled every 5 s,
+  and the system memory in use at that peak against before launch;
 - the seconds from launching the agents until all had joined;
 - the messages and payload bytes through the coordinator per minute (the
   agents talk only to it);
@@ -35,16 +35,25 @@ from coordinator.runtime import FleetConfig
 
 
 class PssSampler:
-    """The peak over samples of the processes' total PSS, and the system memory in use then."""
+    """The peak over samples of the processes' total PSS, and the system memory in use then.
 
-    def __init__(self) -> None:
+    Samples at most every ``interval_s`` seconds: reading a process's PSS walks
+    its page tables, which takes CPU from the run being measured.
+    """
+
+    def __init__(self, interval_s: float = 5.0) -> None:
         self.before_mb = system_used_mb()
         self.peak_mb = 0.0
         self.per_agent_mb: list[float] = []
         self.system_mb = self.before_mb
         self.samples = 0
+        self.interval_s = interval_s
+        self._last = -float("inf")
 
     def __call__(self, pids: list[int]) -> None:
+        if time.monotonic() - self._last < self.interval_s:
+            return
+        self._last = time.monotonic()
         sizes = [pss_mb(pid) for pid in pids]
         sizes = [s for s in sizes if s is not None]
         self.samples += 1
