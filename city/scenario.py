@@ -66,7 +66,10 @@ def scenario_path(name: str) -> Path | None:
 
 
 def scenario_spec(name: str, data_dir: Path | str | None = None, *, validate: bool = True) -> ScenarioSpec | None:
-    """The parsed, checked scenario file of ``name`` (``None`` for ``synthetic``); one-line errors (``validate``: see :func:`read_scenario_file`)."""
+    """The parsed, checked scenario file of ``name`` (``None`` for ``synthetic``); one-line errors.
+
+    ``validate=False`` skips the checks of names (see :func:`read_scenario_file`).
+    """
     path = scenario_path(name)
     if path is None:
         return None

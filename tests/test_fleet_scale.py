@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import zenoh
 
 from bus.router import free_tcp_port, router_main, wait_for_tcp
 from bus.session import SessionArgs, open_session
