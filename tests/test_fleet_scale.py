@@ -111,3 +111,16 @@ def test_projection_splits_each_wave_over_the_hosts_and_keeps_its_slowest_agent(
     assert one == pytest.approx(0.1 + 2.0 + 0.6)  # the measured waves; the lone agent's wave no faster than it alone
     assert two == pytest.approx(0.1 + 1.0 + 0.6)  # two agents of the first wave on each host
     assert each == pytest.approx(0.1 + 0.6 + 0.6)  # one agent a host: the slowest agent alone
+
+
+def test_an_agent_maps_the_real_map_without_the_builders_imports() -> None:
+    """What an agent imports to join a real-map run: no scipy graph code, no pyproj, no holidays, no torch."""
+    data = Path(os.environ.get("SURGE_TEST_DATA", SHARED_DATA))
+    if not data.is_dir():
+        pytest.skip("../shared/data not available")
+    load_city("nyc", data)  # the cache exists, as the command that starts a run makes sure
+    code = ("import sys, agents.taxi; from city.scenario import load_city; c = load_city('nyc', sys.argv[1], mmap=True); "
+            "print(c.n_nodes, sorted(m for m in ('scipy.sparse', 'pyproj', 'holidays', 'torch', 'shapely') if m in sys.modules))")
+    run = subprocess.run([sys.executable, "-c", code, str(data)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split(" ", 1)[1].strip() == "[]"
