@@ -31,8 +31,17 @@ per-decision structures and the rollout over samples and candidates).
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 from numba import njit, prange
+
+# The parallel kernel opens one OpenMP region per decision.  Idle OpenMP threads
+# that spin (GNU's default) take cores from every other agent process on the
+# host and from anything else running there; a sleeping one is woken once per
+# decision, for microseconds.  Read when numba first starts its threads, after
+# this import; a user's own setting wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from agents._basesim import _nearest, _shadow_greedy, _simulate_greedy, _simulate_ia
 from agents._sampling import (

@@ -126,13 +126,18 @@ def base_controls(city: City, config: RolloutConfig, obs: Observation) -> np.nda
 
 
 def prepare_step(city: City, config: RolloutConfig, obs: Observation, tables: DemandTables, minute0: int,
-                 shortcuts: Shortcuts | None = None) -> StepContext:
-    """The shared per-minute context: the base policy's joint control and, with the shortcut, the nearest-request lists."""
+                 shortcuts: Shortcuts | None = None, base: np.ndarray | None = None) -> StepContext:
+    """The shared per-minute context: the base policy's joint control and, with the shortcut, the nearest-request lists.
+
+    ``base`` is that joint control when it is already known (an agent gets
+    it with the state), so that it is computed once per minute, not per agent.
+    """
     sc = shortcuts or Shortcuts()
     near = near_d = None
     if sc.minute_lists and obs.req_pickup.size:
         near, near_d = K.nearest_lists(city.dist, np.ascontiguousarray(obs.req_pickup, dtype=np.int32), MINUTE_NEAR_K)
-    return StepContext(city, config, obs, base_controls(city, config, obs), tables, int(minute0), sc, near, near_d)
+    base = base_controls(city, config, obs) if base is None else np.asarray(base, dtype=np.int32)
+    return StepContext(city, config, obs, base, tables, int(minute0), sc, near, near_d)
 
 
 def candidate_controls(city: City, obs: Observation, agent: int) -> np.ndarray:
@@ -356,13 +361,15 @@ def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False) -> int
     return int(inp.cands[int(np.argmin(totals))])
 
 
-def warm_up(city: City | None = None, config: RolloutConfig | None = None) -> None:
+def warm_up(city: City | None = None, config: RolloutConfig | None = None, serial: bool = False) -> None:
     """Plan once on a made-up minute with two samples: loads the compiled kernels, or compiles them on a fresh checkout.
 
     Launchers call it before spawning agents, so that numba compiles once into
     its on-disk cache instead of in every agent at the same time.  Any city
     serves (the embedded synthetic one by default): the kernels depend on
-    types, not on the map.
+    types, not on the map.  ``serial`` plans in the calling thread and leaves
+    the parallel kernel unloaded: its OpenMP runtime must not be running in a
+    process that forks (:mod:`agents.preload`).
     """
     if city is None:
         from city.scenario import load_city
@@ -375,7 +382,7 @@ def warm_up(city: City | None = None, config: RolloutConfig | None = None) -> No
     cfg = replace(config, samples=2)
     obs = Observation(t=0, pos=nodes[:1], tau=np.zeros(1, np.int32), dest=np.full(1, -1, np.int32), req_index=np.zeros(1, np.int64),
                       req_pickup=nodes[:1], req_dropoff=nodes[-1:], req_entry=np.zeros(1, np.int32))
-    plan_agent(prepare_step(city, cfg, obs, DemandTables.build(city, fc, cfg.ce, cfg.seed), 0), np.empty(0, np.int32), 0)
+    _plan(prepare_step(city, cfg, obs, DemandTables.build(city, fc, cfg.ce, cfg.seed), 0), np.empty(0, np.int32), 0, serial)
 
 
 class RolloutPolicy(Policy):

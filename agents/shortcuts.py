@@ -85,8 +85,11 @@ def transposed(city: City) -> tuple[np.ndarray, np.ndarray]:
     The rollout reads distances *to* an arrival's pickup from many taxis and
     walks many taxis *towards* one target: with the target's row contiguous
     those reads stay in cache (``Shortcuts.rows``).  Costs one more copy of
-    each matrix per process.
+    each matrix per process, unless the city was mapped from its file, which
+    holds them (``City.load(mmap=True)``).
     """
+    if city.dist_t is not None and city.next_hop_t is not None:
+        return city.dist_t, city.next_hop_t
     with _TRANSPOSED_LOCK:
         hit = _TRANSPOSED.get(id(city))
         if hit is None or hit[0] is not city:

@@ -2,10 +2,13 @@
 
 The agent fetches the run's :class:`~bus.wire.RunSpec` from the coordinator,
 builds the static city once (from its on-disk cache), then reacts to what
-arrives: states and forecasts update its copy of the world, committed
-controls of the agents before it fill in its predecessors' moves, and a
-:class:`~bus.wire.Turn` makes it run :func:`agents.rollout.plan_agent`,
-exactly the function the in-process policy calls, and publish the result.
+arrives: states and forecasts update its copy of the world, and a
+:class:`~bus.wire.Turn`, which carries the committed controls of the
+predecessors this agent depends on (:mod:`agents.waves`), makes it run
+:func:`agents.rollout.plan_agent`, exactly the function the in-process
+policy calls, and publish the result.  It subscribes to no commitments:
+only its turn wakes it, and the state brings the minute's base controls, so
+a free agent does not recompute them while others plan.
 
 Nothing received is used before it is checked against what the agent knows
 (:mod:`bus.checks`): the fleet's size, the city's nodes, the current minute,
@@ -28,7 +31,7 @@ import numpy as np
 
 from agents.forecast import Forecast
 from agents.rollout import DemandTables, RolloutConfig, StepContext, candidate_controls, plan_agent, prepare_step, warm_up
-from bus.checks import (Bounds, Rejections, check_choice, check_control, check_forecast, check_spec, check_state,
+from bus.checks import (Bounds, Rejections, check_choice, check_forecast, check_spec, check_state,
                         check_stop, check_turn)
 from bus.delta import StateView
 from bus.keys import Keys
@@ -62,9 +65,7 @@ class TaxiAgent:
         self.me = config.index
         self.view = StateView()
         self.tables: dict[int, DemandTables] = {}
-        self.committed: dict[int, dict[int, int]] = {}
         self.pending: Turn | None = None
-        self.early: list[tuple[Control, str]] = []
         self.context: StepContext | None = None
         self.decisions = 0
         self.rejected = Rejections(lambda m: log(self.me, m))
@@ -78,7 +79,6 @@ class TaxiAgent:
                 inbox.subscribe(session, self.keys.state, "state"),
                 inbox.subscribe(session, self.keys.forecast, "forecast"),
                 inbox.subscribe(session, self.keys.turn(self.me), "turn"),
-                inbox.subscribe(session, self.keys.all_committed, "committed"),
                 inbox.subscribe(session, self.keys.stop, "stop"),
             ]
             spec = self._fetch_spec(session)
@@ -129,7 +129,7 @@ class TaxiAgent:
             from city.scenario import load_city
 
             try:
-                self._cities[where] = load_city(*where)
+                self._cities[where] = load_city(*where, mmap=True)  # the matrices shared with every agent on this host
             except Exception as exc:
                 self._cities[where] = exc
         city = self._cities[where]
@@ -175,36 +175,28 @@ class TaxiAgent:
             if not self.view.apply(msg):
                 self._snapshot(session)
             self.context = None
-            early, self.early = self.early, []
-            for c, k in early:  # commitments that came ahead of their minute's state
-                try:
-                    self._on_committed(c, k)
-                except Exception as exc:
-                    self.rejected.exception("committed", k, exc)
         elif tag == "forecast":
             self._on_forecast(decode(payload, ForecastMsg, key))  # type: ignore[arg-type]
             self.context = None
-        elif tag == "committed":
-            self._on_committed(decode(payload, Control, key), key)  # type: ignore[arg-type]
         elif tag == "turn":
             self.pending = check_turn(decode(payload, Turn, key), key, self.me, self.bounds, self._minute())  # type: ignore[arg-type]
         return True
 
-    def _on_committed(self, c: Control, key: str) -> None:
-        """A predecessor's committed control of the current minute, and one of that predecessor's controls."""
-        obs = self.view.obs
-        if obs is None:
-            raise WireError(f"{key}: a committed control before this agent has a state")
-        if c.t == obs.t + 1 and len(self.early) < self.bounds.taxis:
-            self.early.append((c, key))  # checked once the state of minute c.t is in
-            return
-        if c.t == obs.t - 1:
-            return  # a later agent's commitment of the minute before, overtaken by this minute's state: no longer needed
-        check_control(c, key, self.bounds, int(obs.t))
-        if obs.tau[c.agent] > 0:
-            raise WireError(f"{key}: agent {c.agent} is busy at minute {obs.t}; it commits no control")
-        check_choice(c, key, candidate_controls(self.city, obs, c.agent))
-        self.committed.setdefault(c.t, {})[c.agent] = c.control
+    def _predecessors(self, turn: Turn) -> np.ndarray:
+        """The controls of agents ``0 … me-1`` for ``turn``: the state's base controls, with the turn's committed ones put in.
+
+        Each carried control must be a free predecessor's candidate control at
+        the turn's minute; a turn that fails is dropped, and the agent waits for
+        the coordinator's next.
+        """
+        obs, key = self.view.obs, self.keys.turn(self.me)
+        committed = self.context.base_controls[: self.me].copy()
+        for a, c in zip(turn.deps.tolist(), turn.controls.tolist()):
+            if obs.tau[a] > 0:
+                raise WireError(f"{key}: agent {a} is busy at minute {obs.t}; it commits no control")
+            check_choice(Control(t=turn.t, agent=a, control=c), key, candidate_controls(self.city, obs, a))
+            committed[a] = c
+        return committed
 
     def _loop(self, session, inbox: Inbox, out) -> None:  # noqa: ANN001
         while True:
@@ -226,28 +218,20 @@ class TaxiAgent:
         if obs is None or obs.t // 60 not in self.tables or obs.tau[self.me] > 0:
             return
         if self.context is None or self.context.obs.t != obs.t:
-            self.context = prepare_step(self.city, self.rollout, obs, self.tables[obs.t // 60], obs.t % 60)
+            self.context = prepare_step(self.city, self.rollout, obs, self.tables[obs.t // 60], obs.t % 60, base=self.view.base)
 
     def _maybe_plan(self, out) -> None:  # noqa: ANN001
         turn, obs = self.pending, self.view.obs
         if turn is None or obs is None or obs.t != turn.t or self.context is None or self.context.obs.t != turn.t:
             return
-        free_before = np.flatnonzero(obs.tau[: self.me] == 0)
-        mine = self.committed.get(turn.t, {})
-        if any(int(a) not in mine for a in free_before):
-            return
-        committed = self.context.base_controls[: self.me].copy()
-        for a in free_before:
-            committed[a] = mine[int(a)]
+        self.pending = None  # a turn is planned, or dropped, once
+        committed = self._predecessors(turn)
         t0 = time.perf_counter()
         control = plan_agent(self.context, committed, self.me)
         plan_s = time.perf_counter() - t0
         rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         out.put(Control(t=turn.t, agent=self.me, control=int(control), plan_s=plan_s, rss_mb=rss_mb).encode())
         self.decisions += 1
-        self.pending = None
-        for t in [t for t in self.committed if t < turn.t]:
-            del self.committed[t]
 
 
 def agent_main(config: AgentConfig) -> int:

@@ -14,10 +14,12 @@ decision, are the same whatever ``i`` commits, and ``j`` does not wait for it.
 The waves are the levels of this graph: an agent's wave is one more than the
 latest wave among the predecessors it depends on.  Agents of one wave can
 plan concurrently once the earlier waves are committed, and the result is
-the same as strictly sequential turns (``tests/test_planning_speed.py``).
-The number of waves is the critical path of the minute.  This module is the
-one place that decides it, for the in-process policy and, later, for the
-distributed coordinator.  Busy taxis are not planned and constrain nothing.
+the same as strictly sequential turns (``tests/test_planning_speed.py``,
+``tests/test_waves.py``).  The number of waves is the critical path of the
+minute.  This module is the one place that decides it, for the in-process
+policy (threads, ``workers``) and for the distributed coordinator, which
+releases each wave's turns at once and sends each agent the commitments of
+its ``depends``.  Busy taxis are not planned and constrain nothing.
 """
 
 from __future__ import annotations

@@ -60,6 +60,7 @@ def check_state(msg: State, key: str, b: Bounds) -> State:
     for name in ("new_pickup", "new_dropoff"):
         _within(key, name, getattr(msg, name), 0, b.nodes)
     _within(key, "new_entry", msg.new_entry, 0, msg.t + 1)
+    _within(key, "base", msg.base, -1, b.nodes)
     for name in ("new_index", "picked"):
         arr = getattr(msg, name)
         _within(key, name, arr, 0, np.iinfo(np.int32).max)
@@ -117,6 +118,10 @@ def check_turn(msg: Turn, key: str, me: int, b: Bounds, t: int | None) -> Turn:
         raise WireError(f"{key}: field 't' is {msg.t}, the current minute is {t}")
     if not 0 <= msg.t < b.minutes:
         raise WireError(f"{key}: field 't' is {msg.t}, outside the episode's minutes 0..{b.minutes - 1}")
+    _within(key, "deps", msg.deps, 0, me)
+    if msg.deps.size and np.any(np.diff(msg.deps) <= 0):
+        raise WireError(f"{key}: field 'deps' is not ascending without repeats")
+    _within(key, "controls", msg.controls, -1, b.nodes)
     return msg
 
 

@@ -14,8 +14,8 @@ from bus.wire import State
 from city.sim import Observation
 
 
-def state_message(obs: Observation, previous: np.ndarray | None) -> State:
-    """The state of minute ``obs.t`` as a delta against the outstanding request indices ``previous``.
+def state_message(obs: Observation, previous: np.ndarray | None, base: np.ndarray) -> State:
+    """The state of minute ``obs.t`` as a delta against the outstanding request indices ``previous``, with the minute's ``base`` controls.
 
     ``previous=None`` gives a full state.
     """
@@ -26,7 +26,7 @@ def state_message(obs: Observation, previous: np.ndarray | None) -> State:
     return State(
         t=int(obs.t), full=full, pos=obs.pos, tau=obs.tau, dest=obs.dest,
         new_index=now[new].astype(np.int32), new_pickup=obs.req_pickup[new], new_dropoff=obs.req_dropoff[new],
-        new_entry=obs.req_entry[new], picked=picked, outstanding=int(now.size),
+        new_entry=obs.req_entry[new], picked=picked, outstanding=int(now.size), base=base,
     )
 
 
@@ -35,6 +35,8 @@ class StateView:
 
     def __init__(self) -> None:
         self.obs: Observation | None = None
+        #: The base policy's joint control of minute ``obs.t``, as the coordinator computed it.
+        self.base: np.ndarray | None = None
         self._req: dict[int, tuple[int, int, int]] = {}
 
     def apply(self, msg: State) -> bool:
@@ -57,4 +59,5 @@ class StateView:
             req_pickup=np.ascontiguousarray(rows[:, 0]), req_dropoff=np.ascontiguousarray(rows[:, 1]),
             req_entry=np.ascontiguousarray(rows[:, 2]),
         )
+        self.base = msg.base
         return True

@@ -184,12 +184,16 @@ class State(Message):
     ``full`` states (answers to a snapshot query) list every outstanding
     request in ``new_*`` and nothing in ``picked``; per-minute states list the
     requests that entered at ``t`` and those picked up during minute ``t - 1``.
-    ``outstanding`` lets a receiver check that its copy kept up.
+    ``outstanding`` lets a receiver check that its copy kept up.  ``base`` is
+    the base policy's joint control for minute ``t`` (a node id per taxi, or
+    −1 for a pickup; a busy taxi's next hop), computed once by the
+    coordinator so that no agent recomputes it.
     """
 
     kind: ClassVar[str] = "state"
     arrays: ClassVar[dict[str, str]] = {
         "pos": I32, "tau": I32, "dest": I32, "new_index": I32, "new_pickup": I32, "new_dropoff": I32, "new_entry": I32, "picked": I32,
+        "base": I32,
     }
     t: int
     full: bool
@@ -202,11 +206,12 @@ class State(Message):
     new_entry: np.ndarray
     picked: np.ndarray
     outstanding: int
+    base: np.ndarray
 
     def __post_init__(self) -> None:
         m, k = len(self.pos), len(self.new_index)
-        if len(self.tau) != m or len(self.dest) != m:
-            raise ValueError(f"state {self.t}: pos, tau and dest must have one entry per taxi")
+        if len(self.tau) != m or len(self.dest) != m or len(self.base) != m:
+            raise ValueError(f"state {self.t}: pos, tau, dest and base must have one entry per taxi")
         if not (len(self.new_pickup) == len(self.new_dropoff) == len(self.new_entry) == k):
             raise ValueError(f"state {self.t}: new_index, new_pickup, new_dropoff and new_entry differ in length")
 
@@ -222,11 +227,25 @@ class Snapshot(Message):
 
 @dataclass(frozen=True)
 class Turn(Message):
-    """Agent ``agent`` plans minute ``t`` now; its free predecessors' controls are committed."""
+    """Agent ``agent`` plans minute ``t`` now, with the committed controls of the predecessors it depends on.
+
+    ``deps`` are those predecessors (ascending agent indices, all free and
+    before ``agent``) and ``controls`` their committed controls, in the same
+    order: the agent plays every other predecessor at the state's ``base``
+    control, which cannot change its costs (:mod:`agents.waves`).  Carrying
+    them here spares the agent a subscription to every commitment.
+    """
 
     kind: ClassVar[str] = "turn"
+    arrays: ClassVar[dict[str, str]] = {"deps": I32, "controls": I32}
     t: int
     agent: int
+    deps: np.ndarray
+    controls: np.ndarray
+
+    def __post_init__(self) -> None:
+        if len(self.deps) != len(self.controls):
+            raise ValueError(f"turn {self.t}: deps and controls differ in length")
 
 
 @dataclass(frozen=True)

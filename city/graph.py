@@ -2,21 +2,28 @@
 
 Everything a process needs to move a taxi is precomputed once and stored as
 plain numpy arrays: the out-adjacency, the sector partition, sector adjacency,
-and the all-pairs hop counts and next hops. One ``.npz`` file holds it all so
-that an agent process can load a city in well under a second.
+and the all-pairs hop counts and next hops. One uncompressed ``.npz`` file
+holds it all so that an agent process can load a city in well under a second;
+``City.load(path, mmap=True)`` maps its matrices from that file instead of
+reading them, so that every agent process on a host shares one copy in the
+page cache.
 """
 
 from __future__ import annotations
 
 import json
+import struct
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components, shortest_path
 
 from city.errors import DataError
+
+if TYPE_CHECKING:  # scipy builds cities; loading one (an agent) does not import it
+    from scipy.sparse import csr_matrix
 
 FORMAT = "surge.city/1"
 
@@ -49,6 +56,10 @@ class City:
         First node after ``i`` on a shortest path ``i -> j`` (``j`` itself when ``i == j``).
     dist_m : ndarray of float32, shape (n, n)
         Length in metres of the hop-shortest path ``i -> j``.
+    dist_t, next_hop_t : ndarray or None
+        ``dist`` and ``next_hop`` transposed and contiguous, when mapped from a
+        city file (``load(mmap=True)``); ``None`` otherwise, and the rollout
+        makes them itself (:func:`agents.shortcuts.transposed`).
     """
 
     name: str
@@ -67,6 +78,8 @@ class City:
     next_hop: np.ndarray
     dist_m: np.ndarray
     info: dict = field(default_factory=dict)
+    dist_t: np.ndarray | None = field(default=None, repr=False, compare=False)
+    next_hop_t: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def n_nodes(self) -> int:
@@ -117,6 +130,9 @@ class City:
         The graph must be strongly connected; loaders keep the largest strongly
         connected component first (see :func:`largest_scc`).
         """
+        from scipy.sparse import csr_matrix
+        from scipy.sparse.csgraph import connected_components, shortest_path
+
         n = int(np.asarray(xy).shape[0])
         u = np.asarray(edges_u, dtype=np.int64)
         v = np.asarray(edges_v, dtype=np.int64)
@@ -184,18 +200,33 @@ class City:
             "info": self.info,
         }
         arrays = {k: getattr(self, k) for k in _ARRAYS}
+        arrays["dist_t"] = np.ascontiguousarray(self.dist.T) if self.dist_t is None else self.dist_t
+        arrays["next_hop_t"] = np.ascontiguousarray(self.next_hop.T) if self.next_hop_t is None else self.next_hop_t
         with open(path, "wb") as fh:
             np.savez(fh, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8), **arrays)
         return path
 
     @classmethod
-    def load(cls, path: str | Path) -> "City":
+    def load(cls, path: str | Path, mmap: bool = False) -> "City":
+        """Read a city file; with ``mmap`` its arrays are copy-on-write maps of the file (and the transposed matrices come too).
+
+        Copy-on-write rather than read-only: the pages are the page cache's,
+        shared by every process that maps the file, and nothing writes to
+        them; a read-only array would be a different type to numba, which
+        would compile the rollout's kernels a second time.
+        """
         path = Path(path)
         try:
-            with np.load(path, allow_pickle=False) as z:
-                meta = json.loads(z["meta"].tobytes().decode())
-                arrays = {k: z[k] for k in _ARRAYS}
-        except (OSError, KeyError, ValueError) as exc:
+            if mmap:
+                mapped = _mapped_npz(path)
+                meta = json.loads(mapped["meta"].tobytes().decode())
+                arrays = {k: mapped[k] for k in _ARRAYS}
+                arrays.update({k: mapped[k] for k in ("dist_t", "next_hop_t") if k in mapped})
+            else:
+                with np.load(path, allow_pickle=False) as z:
+                    meta = json.loads(z["meta"].tobytes().decode())
+                    arrays = {k: z[k] for k in _ARRAYS}
+        except (OSError, KeyError, ValueError, zipfile.BadZipFile, struct.error) as exc:
             raise DataError(f"{path}: not a surge city file ({exc})") from exc
         if meta.get("format") != FORMAT:
             raise DataError(f"{path}: city format {meta.get('format')!r}, expected {FORMAT!r}")
@@ -224,6 +255,37 @@ _ARRAYS = (
 )
 
 
+def _mapped_npz(path: Path) -> dict[str, np.ndarray]:
+    """The arrays of an uncompressed ``.npz`` (``np.savez``'s) as copy-on-write maps of the file, by name.
+
+    A member of a stored (uncompressed) zip is its ``.npy`` bytes at a known
+    offset: the local header, then the ``.npy`` header, then the data.
+    """
+    out = {}
+    with zipfile.ZipFile(path) as zf, open(path, "rb") as fh:
+        for info in zf.infolist():
+            if info.compress_type != zipfile.ZIP_STORED:
+                raise ValueError(f"member {info.filename} is compressed; it cannot be mapped")
+            fh.seek(info.header_offset)
+            local = fh.read(30)
+            if local[:4] != b"PK\x03\x04":
+                raise ValueError(f"member {info.filename} has no local header")
+            name_len, extra_len = struct.unpack("<HH", local[26:30])
+            fh.seek(info.header_offset + 30 + name_len + extra_len)
+            version = np.lib.format.read_magic(fh)
+            read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, fortran, dtype = read_header(fh)
+            if dtype.hasobject:
+                raise ValueError(f"member {info.filename} holds Python objects")
+            name = info.filename.removesuffix(".npy")
+            if int(np.prod(shape)) == 0:
+                out[name] = np.empty(shape, dtype=dtype)
+                continue
+            mm = np.memmap(path, dtype=dtype, mode="c", shape=shape, order="F" if fortran else "C", offset=fh.tell())
+            out[name] = np.asarray(mm)
+    return out
+
+
 def _path_lengths(adj: csr_matrix, dist: np.ndarray, next_hop: np.ndarray) -> np.ndarray:
     """Metres along the hop-shortest paths, filled in order of increasing hop count."""
     n = dist.shape[0]
@@ -244,6 +306,9 @@ def _path_lengths(adj: csr_matrix, dist: np.ndarray, next_hop: np.ndarray) -> np
 
 def largest_scc(n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Boolean mask of the nodes in the largest strongly connected component."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
     adj = csr_matrix((np.ones(len(u)), (u, v)), shape=(n, n))
     _, labels = connected_components(adj, directed=True, connection="strong")
     counts = np.bincount(labels)

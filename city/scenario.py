@@ -28,7 +28,7 @@ SCENARIOS = ("synthetic", *SHIPPED)
 #: and agent processes build the same world as the command that started them.
 SHARE_ENV = "SURGE_SHARE"
 #: Bump when a change to a city builder changes its output, so caches rebuild.
-CITY_VERSION = "2"
+CITY_VERSION = "3"
 
 
 @dataclass(frozen=True)
@@ -65,8 +65,11 @@ def scenario_path(name: str) -> Path | None:
     raise ConfigError(f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)} or give a scenario .toml file")
 
 
-def scenario_spec(name: str, data_dir: Path | str | None = None) -> ScenarioSpec | None:
-    """The parsed, checked scenario file of ``name`` (``None`` for ``synthetic``); one-line errors."""
+def scenario_spec(name: str, data_dir: Path | str | None = None, *, validate: bool = True) -> ScenarioSpec | None:
+    """The parsed, checked scenario file of ``name`` (``None`` for ``synthetic``); one-line errors.
+
+    ``validate=False`` skips the checks of names (see :func:`read_scenario_file`).
+    """
     path = scenario_path(name)
     if path is None:
         return None
@@ -74,7 +77,7 @@ def scenario_spec(name: str, data_dir: Path | str | None = None) -> ScenarioSpec
         raise ConfigError(f"scenario {name!r} needs --data DIR (a directory laid out like shared/data)")
     if data_dir is not None and not Path(data_dir).is_dir():
         raise ConfigError(f"data directory {data_dir} does not exist")
-    return read_scenario_file(path, data_dir)
+    return read_scenario_file(path, data_dir, validate=validate)
 
 
 def check_scenario(name: str, data_dir: Path | str | None) -> Path | None:
@@ -85,9 +88,13 @@ def check_scenario(name: str, data_dir: Path | str | None) -> Path | None:
     return Path(data_dir) if data_dir is not None else None
 
 
-def load_city(name: str, data_dir: Path | str | None = None, *, use_cache: bool = True) -> City:
-    """Build (or load from cache) the street graph of a scenario."""
-    spec = scenario_spec(name, data_dir)
+def load_city(name: str, data_dir: Path | str | None = None, *, use_cache: bool = True, mmap: bool = False) -> City:
+    """Build (or load from cache) the street graph of a scenario; with ``mmap``, mapped from the cache file (see :meth:`City.load`).
+
+    ``mmap`` is how agents load the city: they skip the checks of names in the
+    scenario file, which the command that started the run has made.
+    """
+    spec = scenario_spec(name, data_dir, validate=not mmap)
     key = hashlib.sha256(f"{name if spec is None else spec.name}|{CITY_VERSION}".encode())
     if spec is not None:
         key.update(repr((spec.streets.crs, spec.zones.id_field, spec.zones.name_field, spec.zones.select, spec.zones.missing)).encode())
@@ -97,7 +104,7 @@ def load_city(name: str, data_dir: Path | str | None = None, *, use_cache: bool 
     label = "synthetic" if spec is None else spec.name
     path = cache_dir() / f"city-{label}-{key.hexdigest()[:16]}.npz"
     if use_cache and path.exists():
-        return City.load(path)
+        return City.load(path, mmap=mmap)
     if spec is None:
         from city.synthetic import synthetic_city
 
@@ -108,6 +115,8 @@ def load_city(name: str, data_dir: Path | str | None = None, *, use_cache: bool 
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         city.save(tmp)
         os.replace(tmp, path)
+        if mmap:
+            return City.load(path, mmap=True)
     return city
 
 

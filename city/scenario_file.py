@@ -127,9 +127,11 @@ class ScenarioSpec:
 class _Reader:
     """Walks one TOML table, checking keys and types, and resolving paths; errors name file and key."""
 
-    def __init__(self, path: Path, data_dir: Path | None) -> None:
+    def __init__(self, path: Path, data_dir: Path | None, validate: bool = True) -> None:
         self.path = path
         self.data_dir = data_dir
+        #: Check names against pyproj's and the holidays package's lists (each import costs a process megabytes).
+        self.validate = validate
 
     def fail(self, key: str, problem: str) -> ConfigError:
         return ConfigError(f"{self.path}: {key}: {problem}")
@@ -180,8 +182,12 @@ class _Reader:
         return path if path.is_absolute() else self.path.parent / path
 
 
-def read_scenario_file(path: Path | str, data_dir: Path | str | None = None) -> ScenarioSpec:
+def read_scenario_file(path: Path | str, data_dir: Path | str | None = None, *, validate: bool = True) -> ScenarioSpec:
     """Parse and check a scenario file; ``data_dir`` (``--data``) overrides the file's ``data`` key.
+
+    ``validate=False`` leaves out the checks of the coordinate system and the
+    holiday calendar by name, for a process (an agent) that only maps a city
+    already built from the file.
 
     Raises
     ------
@@ -195,7 +201,7 @@ def read_scenario_file(path: Path | str, data_dir: Path | str | None = None) -> 
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: not a TOML file ({exc})") from None
-    r = _Reader(path, None)
+    r = _Reader(path, None, validate)
     r.known(doc, "", ("name", "data", "timezone", "holidays", "streets", "zones", "weather", "pois", "occupancy", "trips", "events"))
     if data_dir is not None:
         r.data_dir = Path(data_dir)
@@ -214,6 +220,7 @@ def read_scenario_file(path: Path | str, data_dir: Path | str | None = None) -> 
     holidays = {"country": "US", "subdiv": None}
     if (h := r.table(doc, "holidays", ("country", "subdiv"))) is not None:
         holidays = {"country": r.get(h, "holidays", "country", str, required=True), "subdiv": r.get(h, "holidays", "subdiv", str)}
+    if h is not None and validate:
         from city.calendar import holidays_for
 
         try:
@@ -237,13 +244,14 @@ def _streets(r: _Reader, doc: dict) -> StreetsSpec:
     if graphml is None and (nodes is None or edges is None):
         raise r.fail("streets", "needs nodes and edges (OSMnx node/edge CSV files) or graphml")
     crs = r.get(t, "streets", "crs", str, default="EPSG:4326")
-    from pyproj import CRS
-    from pyproj.exceptions import CRSError
+    if r.validate:
+        from pyproj import CRS
+        from pyproj.exceptions import CRSError
 
-    try:
-        CRS.from_user_input(crs)
-    except CRSError:
-        raise r.fail("streets.crs", f"{crs!r} is not a coordinate system pyproj knows (e.g. EPSG:4326, EPSG:32618)") from None
+        try:
+            CRS.from_user_input(crs)
+        except CRSError:
+            raise r.fail("streets.crs", f"{crs!r} is not a coordinate system pyproj knows (e.g. EPSG:4326, EPSG:32618)") from None
     return StreetsSpec(nodes=nodes, edges=edges, graphml=graphml, crs=crs)
 
 

@@ -49,7 +49,7 @@ def shortcut_variant(name: str):  # noqa: ANN201
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("bench", help="benchmarks: city build, simulator speed, planning time")
+    p = sub.add_parser("bench", help="benchmarks: city build, simulator speed, planning time, the distributed fleet")
     bsub = p.add_subparsers(dest="bench", required=True, metavar="BENCH")
 
     c = bsub.add_parser("city", help="time to build each city (all-pairs shortest paths included) and to load it")
@@ -87,6 +87,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                          f"no-NAME for NAME in {', '.join(SHORTCUT_NAMES)} (the first variant's controls are applied)")
     pl.add_argument("--json", default=None)
     pl.set_defaults(func=bench_plan)
+
+    from coordinator.bench_fleet import add_parser as add_fleet
+
+    add_fleet(bsub)
 
 
 def bench_city(args: argparse.Namespace) -> int:

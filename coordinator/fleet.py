@@ -1,8 +1,11 @@
 """The local multi-process fleet: a router, a coordinator and one process per taxi, on loopback.
 
-Every process is started with the ``spawn`` context of ``multiprocess`` (the
-stdlib API, pickling with dill) and opens its own zenoh session; this
-launcher opens none.  The bus is secured unless asked otherwise: the
+The router, coordinator and predictor are started with the ``spawn`` context
+of ``multiprocess`` (the stdlib API, pickling with dill); the agents are
+forked by a fork server that has preloaded what every agent loads
+(:func:`agent_context`, :mod:`agents.preload`), so that they share those
+pages.  Every process opens its own zenoh session, after it starts; this
+launcher and the fork server open none.  The bus is secured unless asked otherwise: the
 launcher makes the run's credentials in the run's directory, and every
 process joins over mutual TLS with its own certificate, under the router's
 access control.  With ``check``, the same instance also runs in-process and
@@ -16,6 +19,7 @@ import multiprocess as mp
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +31,18 @@ from bus.session import SessionArgs
 from city.errors import ConfigError, SurgeError
 from coordinator.args import hour, iso_date, positive, rollout_options, scenario_args
 from coordinator.runtime import FleetConfig
+
+
+def agent_context():  # noqa: ANN201 - a multiprocess context
+    """The context that starts agent processes: forked by a fork server that imported :mod:`agents.preload` first.
+
+    The fork server is a fresh process (not a fork of this one, which may hold
+    threads or a running OpenMP runtime); it opens no zenoh session, so each
+    agent opens its own after the fork (``tests/test_fleet_scale.py``).
+    """
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(["agents.preload"])
+    return ctx
 
 
 def _agent_entry(index: int, run: str, bus: SessionArgs, join_timeout_s: float, data_dir: str | None = None) -> None:
@@ -57,12 +73,15 @@ def in_process(cfg: FleetConfig) -> dict:
             "step_seconds": {"median": float(np.median(res.plan_seconds)), "max": float(np.max(res.plan_seconds))}}
 
 
-def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None = None, startup_timeout_s: float = 60.0) -> dict:
+def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None = None, startup_timeout_s: float = 60.0,
+                    watch: Callable[[list[int]], None] | None = None) -> dict:
     """Run ``cfg`` as real processes over a loopback router; the coordinator's result.
 
     ``secure`` runs the bus with mutual TLS and access control, with the
     credentials in ``certs`` or, by default, new ones made in the run's
-    temporary directory.
+    temporary directory.  ``watch`` is called with the agents' process ids
+    about once a second while the coordinator runs (a benchmark samples
+    their memory).
     """
     from agents.rollout import warm_up
 
@@ -73,10 +92,11 @@ def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None 
             make_certs(certs, cfg.taxis)
         elif secure and fleet_size(certs) < cfg.taxis:
             raise ConfigError(f"--certs {certs}: credentials for {fleet_size(certs)} taxis, the run has {cfg.taxis}")
-        return _launch(cfg, certs if secure else None, str(Path(tmp) / "result.json"), startup_timeout_s)
+        return _launch(cfg, certs if secure else None, str(Path(tmp) / "result.json"), startup_timeout_s, watch)
 
 
-def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeout_s: float) -> dict:
+def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeout_s: float,
+            watch: Callable[[list[int]], None] | None = None) -> dict:
     ctx = mp.get_context("spawn")
     port = free_tcp_port()
     endpoint = f"{'tcp' if certs is None else 'tls'}/127.0.0.1:{port}"
@@ -99,12 +119,17 @@ def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeo
                             name="surge-coordinator")
         coord.start()
         procs.append(coord)
-        agents = [ctx.Process(target=_agent_entry, args=(i, cfg.run, client.as_identity(taxi_name(i)), cfg.join_timeout_s),
-                              name=f"surge-agent-{i}") for i in range(cfg.taxis)]
+        forks = agent_context()
+        agents = [forks.Process(target=_agent_entry, args=(i, cfg.run, client.as_identity(taxi_name(i)), cfg.join_timeout_s),
+                                name=f"surge-agent-{i}") for i in range(cfg.taxis)]
+        launched_at = time.time()
         for p in agents:
             p.start()
         procs.extend(agents)
-        coord.join()
+        while coord.is_alive():
+            coord.join(1.0)
+            if watch is not None:
+                watch([p.pid for p in agents if p.pid is not None])
         if coord.exitcode != 0:
             raise ConfigError(f"the coordinator failed (exit code {coord.exitcode}); see its message above")
         result = json.loads(Path(result_path).read_text())
@@ -112,6 +137,7 @@ def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeo
         for p in agents:
             p.join(max(0.1, deadline - time.monotonic()))
         result["agents_exit_codes"] = [p.exitcode for p in agents]
+        result["launched_at"] = launched_at
         result["secured"] = certs is not None
         return result
     finally:
@@ -172,6 +198,10 @@ def _print_result(result: dict, path: str | None) -> None:
     plan = result["agent_plan_seconds"]["median"]
     print(f"  minute wall time median {result['step_seconds']['median']:.3f} s, max {result['step_seconds']['max']:.3f} s; "
           f"agent plan median {plan if plan is None else f'{plan:.3f} s'}; agent peak RSS {result['agent_peak_rss_mb']:.0f} MB")
+    if result.get("critical_path"):
+        print(f"  turns in dependency waves: median {np.median(result['critical_path']):g} waves a minute for a median "
+              f"{np.median(result['free_per_minute']):g} free taxis (the critical path; {result['traffic']['messages_per_minute']:.0f} "
+              f"messages a minute through the coordinator)")
     print(f"  decisions sha256 {result['decisions_sha256']}")
     if path:
         Path(path).write_text(json.dumps(result, indent=1))
@@ -266,7 +296,7 @@ def cmd_agents(args) -> int:  # noqa: ANN001
     from agents.rollout import warm_up
 
     warm_up()  # compile once here, not in every agent at once
-    ctx = mp.get_context("spawn")
+    ctx = agent_context()
     procs = [ctx.Process(target=_agent_entry, args=(i, args.run, bus.as_identity(taxi_name(i)), args.join_timeout, args.data),
                          name=f"surge-agent-{i}") for i in ids]
     print(f"starting {len(procs)} agent processes for run {args.run!r}", file=sys.stderr, flush=True)

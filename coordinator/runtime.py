@@ -1,8 +1,11 @@
 """The coordinator of a distributed run: the clock, the ground-truth world and the order of turns.
 
-Each minute it publishes the state (a delta) and, at each hour, the forecast;
-then it gives the free taxis their turns one at a time, in agent order, and
-commits each control it receives so that the agents after it can see it.  A
+Each minute it publishes the state (a delta, with the minute's base
+controls) and, at each hour, the forecast; then it releases the free taxis'
+turns in dependency waves (:func:`agents.waves.plan_waves`, the same graph
+the in-process policy plans by): every agent of a wave gets its turn at
+once, with the committed controls of the predecessors it depends on, and
+the next wave starts when the wave's controls are committed.  A
 silent agent (its liveliness token gone, or past the deadline) gets the base
 policy's control for that minute, which is what the in-process rollout
 assumes for the agents after the decider, and the run goes on.  A restarted
@@ -29,6 +32,7 @@ import numpy as np
 
 from agents.base import EpisodeContext, make_policy, policy_class
 from agents.rollout import RolloutConfig, RolloutPolicy, base_controls, candidate_controls
+from agents.waves import Waves, plan_waves
 from bus.checks import Bounds, Rejections, check_choice, check_control, check_forecast
 from bus.delta import state_message
 from bus.keys import Keys
@@ -36,6 +40,7 @@ from bus.session import Inbox, SessionArgs, open_session, publisher
 from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
 from city.errors import ConfigError
 from city.sim import FleetSim, Observation, Requests, decisions_hash
+from coordinator.metrics import Counted, Traffic
 
 
 @dataclass(frozen=True)
@@ -127,10 +132,11 @@ class Coordinator:
         self.rejected = Rejections(log)
         #: The minute being played, against which proposed controls are checked.
         self.obs: Observation | None = None
+        self.traffic = Traffic()
 
     # ------------------------------------------------------------------ inbox
-    def _handle(self, item: tuple[str, str, object], want: tuple[int, int] | None = None) -> Control | None:
-        """Serve queries, track liveliness, and return the control ``want`` = (t, agent) if this item is it.
+    def _handle(self, item: tuple[str, str, object], want: set[tuple[int, int]] | None = None) -> Control | None:
+        """Serve queries, track liveliness, and return the control if this item is one of ``want``'s (t, agent).
 
         Anything wrong with the item, or raised while handling it, drops it.
         """
@@ -141,7 +147,7 @@ class Coordinator:
             self.rejected.exception(tag, key, exc)
             return None
 
-    def _handle_one(self, tag: str, key: str, payload: object, want: tuple[int, int] | None) -> Control | None:
+    def _handle_one(self, tag: str, key: str, payload: object, want: set[tuple[int, int]] | None) -> Control | None:
         if tag == "alive":
             agent = Keys.agent_of(key)
             if agent is None or not 0 <= agent < self.cfg.taxis:
@@ -158,18 +164,20 @@ class Coordinator:
             finally:
                 payload.drop()  # type: ignore[attr-defined]  # ends the asker's get() now, not when the query is collected
         elif tag == "control":
+            self.traffic.received(payload)  # type: ignore[arg-type]
             c = check_control(decode(payload, Control, key), key, self.bounds)  # type: ignore[arg-type]
             if c.by != "agent":
                 raise WireError(f"{key}: a proposed control must say by='agent', not {c.by!r}")
             if self.obs is not None and c.t == self.obs.t:
                 check_choice(c, key, candidate_controls(self.city, self.obs, c.agent))
-            if want is not None and (c.t, c.agent) == want:
+            if want is not None and (c.t, c.agent) in want:
                 return c
             self.stale += 1
         return None
 
     def full_state(self) -> bytes:
-        return state_message(self.sim.observe(), None).encode()
+        obs = self.sim.observe()
+        return state_message(obs, None, base_controls(self.city, self.rollout, obs)).encode()
 
     # ------------------------------------------------------------------- run
     def run(self, bus: SessionArgs) -> dict:
@@ -202,15 +210,17 @@ class Coordinator:
 
     def _run(self, session, inbox: Inbox) -> dict:  # noqa: ANN001
         cfg, keys = self.cfg, self.keys
-        pub_state, pub_forecast, pub_stop = (publisher(session, k) for k in (keys.state, keys.forecast, keys.stop))
-        turn_pub = {a: publisher(session, keys.turn(a)) for a in range(cfg.taxis)}
-        commit_pub = {a: publisher(session, keys.committed(a)) for a in range(cfg.taxis)}
+        pub_state, pub_forecast, pub_stop = (Counted(publisher(session, k), self.traffic) for k in (keys.state, keys.forecast, keys.stop))
+        turn_pub = {a: Counted(publisher(session, keys.turn(a)), self.traffic) for a in range(cfg.taxis)}
+        commit_pub = {a: Counted(publisher(session, keys.committed(a)), self.traffic) for a in range(cfg.taxis)}
         self._wait_for_agents(inbox)
+        joined_at = time.time()
         controls = np.zeros((cfg.minutes, cfg.taxis), dtype=np.int32)
         costs, step_s, plan_s = [], [], []
         planned = np.zeros(cfg.taxis, dtype=np.int64)
         fallbacks = np.zeros(cfg.taxis, dtype=np.int64)
         rss = np.zeros(cfg.taxis)
+        minute_waves: list[list[dict]] = []
         previous = None
         t_start = time.perf_counter()
         for t in range(cfg.minutes):
@@ -219,23 +229,29 @@ class Coordinator:
             if t % 60 == 0:
                 self.forecast_msg = self._forecast(session, inbox, t // 60)
                 pub_forecast.put(self.forecast_msg)
-            pub_state.put(state_message(obs, previous).encode())
-            previous = np.asarray(obs.req_index)
             base = base_controls(self.city, self.rollout, obs)
+            pub_state.put(state_message(obs, previous, base).encode())
+            previous = np.asarray(obs.req_index)
             u = base.copy()
-            for agent in np.flatnonzero(obs.tau == 0).tolist():
-                got = self._turn(inbox, turn_pub[agent], t, agent)
-                if got is None:
-                    fallbacks[agent] += 1
-                    u[agent] = base[agent]
-                    commit = Control(t=t, agent=agent, control=int(base[agent]), by="base")
-                else:
-                    u[agent] = got.control
-                    planned[agent] += 1
-                    plan_s.append(got.plan_s)
-                    rss[agent] = max(rss[agent], got.rss_mb)
-                    commit = got
-                commit_pub[agent].put(commit.encode())
+            waves = plan_waves(self.city, obs, self.rollout.prune)
+            minute_waves.append([])
+            for group in waves.groups():
+                wave_t0 = time.perf_counter()
+                got = self._turns(inbox, turn_pub, t, group.tolist(), waves, u)
+                for agent in group.tolist():
+                    c = got.get(agent)
+                    if c is None:
+                        fallbacks[agent] += 1
+                        commit = Control(t=t, agent=agent, control=int(base[agent]), by="base")
+                    else:
+                        u[agent] = c.control
+                        planned[agent] += 1
+                        plan_s.append(c.plan_s)
+                        rss[agent] = max(rss[agent], c.rss_mb)
+                        commit = c
+                    commit_pub[agent].put(commit.encode())
+                minute_waves[-1].append({"seconds": time.perf_counter() - wave_t0, "agents": group.tolist(),
+                                         "plan_s": [got[a].plan_s if a in got else None for a in group.tolist()]})
             controls[t] = u
             costs.append(self.sim.step(u))
             step_s.append(time.perf_counter() - t0)
@@ -263,10 +279,16 @@ class Coordinator:
             "stale_messages": self.stale,
             "rejected_messages": dict(self.rejected.counts),
             "step_seconds": {"median": float(np.median(step_s)), "max": float(np.max(step_s))},
+            "minute_seconds": step_s,
             "agent_plan_seconds": {"median": float(np.median(plan_s)) if plan_s else None,
                                    "max": float(np.max(plan_s)) if plan_s else None},
             "agent_peak_rss_mb": float(rss.max()),
             "wall_seconds": time.perf_counter() - t_start,
+            "critical_path": [len(w) for w in minute_waves],
+            "free_per_minute": [sum(len(wave["agents"]) for wave in w) for w in minute_waves],
+            "waves": minute_waves,
+            "joined_at": joined_at,
+            "traffic": self.traffic.summary(cfg.minutes),
         }
 
     def _forecast(self, session, inbox: Inbox, hour: int) -> bytes:  # noqa: ANN001
@@ -306,24 +328,45 @@ class Coordinator:
             if item is not None:
                 self._handle(item)
 
-    def _turn(self, inbox: Inbox, pub, t: int, agent: int) -> Control | None:  # noqa: ANN001
-        """Give ``agent`` its turn and wait for one of its controls until the deadline or its departure."""
-        if agent not in self.alive:
-            return None
-        pub.put(Turn(t=t, agent=agent).encode())
+    def _turns(self, inbox: Inbox, pubs: dict, t: int, group: list[int], waves: Waves, u: np.ndarray) -> dict[int, Control]:
+        """Give one wave's agents their turns at once and wait for their controls until the deadline or their departure.
+
+        Each turn carries the committed controls ``u`` of the agent's
+        dependencies, all in earlier waves.  The controls that came, by agent;
+        the missing ones get the base control.
+        """
+        depends = dict(zip(waves.agents.tolist(), waves.depends))
+        waiting = {a for a in group if a in self.alive}
+        for a in sorted(waiting):
+            deps = depends[a]
+            pubs[a].put(Turn(t=t, agent=a, deps=deps, controls=u[deps]).encode())
+        got: dict[int, Control] = {}
         deadline = time.monotonic() + self.cfg.deadline_s
-        while agent in self.alive:
+        while waiting:
             left = deadline - time.monotonic()
             if left <= 0:
-                log(f"minute {t}: agent {agent} silent for {self.cfg.deadline_s:g} s; base control used")
-                return None
+                log(f"minute {t}: {_agents(waiting)} silent for {self.cfg.deadline_s:g} s; base control used")
+                break
             item = inbox.get(timeout=left)
             if item is not None:
-                got = self._handle(item, want=(t, agent))
-                if got is not None:
-                    return got
-        log(f"minute {t}: agent {agent} is gone; base control used")
-        return None
+                c = self._handle(item, want={(t, a) for a in waiting})
+                if c is not None:
+                    got[c.agent] = c
+                    waiting.discard(c.agent)
+            gone = {a for a in waiting if a not in self.alive}
+            if gone:
+                log(f"minute {t}: {_agents(gone)} gone; base control used")
+                waiting -= gone
+        return got
+
+
+def _agents(ids: set[int]) -> str:
+    """``agent 3``, ``agents 3, 5`` or ``agents 0, 1, … and 90 more``: a log line stays one short line."""
+    ids_ = sorted(ids)
+    if len(ids_) == 1:
+        return f"agent {ids_[0]}"
+    more = f" and {len(ids_) - 10} more" if len(ids_) > 10 else ""
+    return f"agents {', '.join(map(str, ids_[:10]))}{more}"
 
 
 def coordinator_main(config: FleetConfig, bus: SessionArgs, result_path: str | None = None) -> dict:

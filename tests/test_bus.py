@@ -31,8 +31,10 @@ def test_every_message_round_trips_exactly() -> None:
     spec = RunSpec(run="r", scenario="synthetic", data_dir=None, city={"intersections": 9}, taxis=3, minutes=5, policy="surge",
                    rollout={"horizon": 4, "samples": 10}, deadline_s=2.5)
     assert decode(spec.encode(), RunSpec) == spec
-    for msg in (Turn(t=3, agent=2), Control(t=3, agent=2, control=-1, by="base", plan_s=0.25), Stop(t=9)):
+    for msg in (Control(t=3, agent=2, control=-1, by="base", plan_s=0.25), Stop(t=9)):
         assert decode(msg.encode(), type(msg)) == msg
+    turn = decode(Turn(t=3, agent=2, deps=np.array([0, 1]), controls=np.array([-1, 7])).encode(), Turn)
+    assert (turn.t, turn.agent, turn.deps.tolist(), turn.controls.tolist()) == (3, 2, [0, 1], [-1, 7])
     snap = Snapshot(state=b"abc", forecast=fc.encode())
     assert decode(snap.encode(), (Turn, Snapshot)) == snap
 
@@ -57,7 +59,7 @@ def test_bad_messages_name_the_key_and_field(payload: bytes, message: str) -> No
 
 def test_bad_arrays_are_caught() -> None:
     good = State(t=0, full=True, pos=[1, 2], tau=[0, 0], dest=[-1, -1], new_index=[], new_pickup=[], new_dropoff=[],
-                 new_entry=[], picked=[], outstanding=0)
+                 new_entry=[], picked=[], outstanding=0, base=[1, -1])
     raw = msgpack.unpackb(good.encode())
     raw["pos"] = b"\x00\x00\x00"
     with pytest.raises(WireError, match="field 'pos': expected int32 bytes"):
@@ -79,17 +81,19 @@ def test_state_deltas_rebuild_every_observation(synthetic_scenario) -> None:  # 
     view, previous, sizes = StateView(), None, []
     for _ in range(15):
         obs = sim.observe()
-        msg = decode(state_message(obs, previous).encode(), State)
+        msg = decode(state_message(obs, previous, greedy_controls(city, obs)).encode(), State)
         assert view.apply(msg)
+        assert np.array_equal(view.base, greedy_controls(city, obs))
         for name in ("pos", "tau", "dest", "req_index", "req_pickup", "req_dropoff", "req_entry"):
             assert np.array_equal(getattr(view.obs, name), getattr(obs, name)), name
         sizes.append(len(msg.new_index))
         previous = obs.req_index
         sim.step(greedy_controls(city, obs))
     assert sum(sizes[1:]) < 15 * len(obs.req_index)  # deltas, not the whole list every minute
-    gap = state_message(sim.observe(), None)
+    now = sim.observe()
+    gap = state_message(now, None, greedy_controls(city, now))
     later = StateView()
-    assert not later.apply(decode(state_message(sim.observe(), previous).encode(), State))  # a delta needs a base
+    assert not later.apply(decode(state_message(now, previous, greedy_controls(city, now)).encode(), State))  # a delta needs a base
     assert later.apply(gap) and later.obs.t == sim.observe().t
 
 

@@ -30,7 +30,8 @@ pytestmark = pytest.mark.usefixtures("compiled_kernels")
 )
 def test_distributed_run_makes_the_in_process_decisions(policy: str, options: dict, predictor: bool, secure: bool) -> None:
     """surge takes its forecasts from a predictor service process over mutual TLS and access control;
-    garces2023 from the coordinator, on an insecure bus."""
+    garces2023 from the coordinator, on an insecure bus.  Turns go out in dependency waves, and the
+    in-process reference plans strictly one agent after another."""
     cfg = FleetConfig(run=f"same-{policy}", taxis=3, minutes=8, policy=policy, options=options, deadline_s=120,
                       join_timeout_s=300, predictor=predictor)
     dist = run_local_fleet(cfg, secure=secure)
@@ -38,6 +39,7 @@ def test_distributed_run_makes_the_in_process_decisions(policy: str, options: di
     assert dist["secured"] is secure
     assert dist["fallbacks"] == 0 and dist["agents_exit_codes"] == [0, 0, 0]
     assert sum(dist["planned_per_agent"]) > 0
+    assert any(c < f for c, f in zip(dist["critical_path"], dist["free_per_minute"]))  # some agents took turns side by side
     assert dist["decisions_sha256"] == ref["decisions_sha256"]
     assert dist["total_cost"] == ref["total_cost"] and dist["served"] == ref["served"]
 

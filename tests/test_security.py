@@ -215,7 +215,7 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
     from agents.rollout import candidate_controls
     from bus.delta import state_message
     from bus.session import Inbox
-    from bus.wire import Control, Stop, Turn, WireError
+    from bus.wire import Control, ForecastMsg, Stop, Turn, WireError, decode
     from city.sim import Observation
 
     agent, spec = _agent()
@@ -229,37 +229,50 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
     pos = np.array([0, 5, 9], dtype=np.int32)
     obs = Observation(t=0, pos=pos, tau=np.zeros(3, np.int32), dest=np.full(3, -1, np.int32), req_index=np.zeros(0, np.int64),
                       req_pickup=np.zeros(0, np.int32), req_dropoff=np.zeros(0, np.int32), req_entry=np.zeros(0, np.int32))
-    good = state_message(obs, None)
-    two = dataclasses.replace(good, pos=pos[:2], tau=good.tau[:2], dest=good.dest[:2])
+    good = state_message(obs, None, np.array([0, 5, 9], dtype=np.int32))
+    two = dataclasses.replace(good, pos=pos[:2], tau=good.tau[:2], dest=good.dest[:2], base=good.base[:2])
     off_map = dataclasses.replace(good, pos=np.array([0, n, 9], dtype=np.int32))
-    ok = int(candidate_controls(agent.city, obs, 0)[-1])
+    cands = candidate_controls(agent.city, obs, 0).tolist()
+    ok, not_a_move = cands[-1], next(v for v in range(n) if v not in cands)
+    fc = ForecastMsg(hour=0, eta=np.full(agent.city.n_sectors, 0.5), rho=np.ones(n), delta=np.ones(n),
+                     beta=np.ones((agent.city.n_sectors, agent.city.n_sectors)))
+    sent = []
+
+    class Out:
+        def put(self, payload: bytes) -> None:
+            sent.append(decode(payload, Control))
+
+    def turn(t: int, deps: list[int], controls: list[int]) -> bytes:
+        return Turn(t=t, agent=1, deps=np.array(deps, np.int32), controls=np.array(controls, np.int32)).encode()
+
     inbox = Inbox()
     for item in [
         ("state", k.state, two.encode()),  # fewer taxis than the run: was an IndexError
         ("state", k.state, off_map.encode()),
         ("state", k.state, good.encode()),
-        ("committed", k.committed(0), Control(t=0, agent=0, control=2**40, by="agent").encode()),  # was an int32 overflow
-        ("committed", k.committed(0), Control(t=0, agent=0, control=-5, by="agent").encode()),  # was a wrapped index
-        ("committed", k.committed(2), Control(t=0, agent=0, control=ok, by="agent").encode()),  # another agent's key
-        ("committed", k.committed(0), Control(t=3, agent=0, control=ok, by="agent").encode()),  # not the current minute
-        ("turn", k.turn(1), Turn(t=2, agent=1).encode()),
+        ("turn", k.turn(1), turn(0, [0], [n])),  # a predecessor's control off the map
+        ("turn", k.turn(1), turn(0, [0], [-5])),  # the same kind: counted, not logged again
+        ("turn", k.turn(1), turn(0, [2], [ok])),  # agent 2 is no predecessor of agent 1
+        ("turn", k.turn(1), turn(2, [], [])),
         ("stop", k.stop, Stop(t=1).encode()),  # not the run's end: the agent stays
         ("forecast", k.forecast, b"\x93\x01\x02"),
-        ("committed", k.committed(0), Control(t=0, agent=0, control=ok, by="agent").encode()),
+        ("forecast", k.forecast, fc.encode()),
+        ("turn", k.turn(1), turn(0, [0], [not_a_move])),  # checked when the agent plans: dropped, no control sent
+        ("turn", k.turn(1), turn(0, [0], [ok])),
         ("stop", k.stop, Stop(t=4).encode()),
     ]:
         inbox.put(*item)
-    agent._loop(None, inbox, None)
+    agent._loop(None, inbox, Out())
     err = capsys.readouterr().err
     for reason in ("field 'pos' has 2 taxis, the run has 3", f"field 'pos' holds {n}, outside 0..{n - 1}",
-                   "control 1099511627776 of agent 0 is not one of its controls",
-                   "control of agent 0 on another agent's key", "field 't' is 3, the current minute is 0",
+                   f"turn/1: field 'controls' holds {n}, outside -1..{n - 1}",
+                   f"control {not_a_move} of agent 0 is not one of its controls",
                    "turn/1: field 't' is 2, the current minute is 0", "field 't' is 1, the run ends after minute 4", "forecast"):
         assert reason in err, reason
-    assert "control -5" not in err  # the same kind as 2**40's: counted, not logged again
-    assert agent.rejected.counts["committed: surge/u/committed/N: control N of agent N is not one of its controls …"] == 2
+    assert "holds -5" not in err and "'deps'" not in err  # the same kind as the first: counted, not logged again
+    assert agent.rejected.counts["turn: surge/u/turn/N: field Q holds N, outside N.N"] == 3
     assert agent.view.obs is not None and agent.view.obs.t == 0
-    assert agent.committed == {0: {0: ok}}  # only the good commitment
+    assert [(c.t, c.agent) for c in sent] == [(0, 1)] and agent.decisions == 1  # only the good turn was planned
 
 
 def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> None:
@@ -272,7 +285,7 @@ def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> 
     from agents.rollout import candidate_controls
 
     ok = int(candidate_controls(coord.city, obs, 1)[0])
-    want = (0, 1)
+    want = {(0, 1)}
     for payload in (Control(t=0, agent=1, control=2**40).encode(), Control(t=0, agent=1, control=-5).encode(),
                     Control(t=0, agent=1, control=ok, by="base").encode(), Control(t=0, agent=1, control=ok, plan_s=float("nan")).encode(),
                     b"junk"):
