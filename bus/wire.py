@@ -216,8 +216,16 @@ class Snapshot(Message):
     """A full state with the current hour's forecast: how an agent joins or rejoins mid-run."""
 
     kind: ClassVar[str] = "snapshot"
+    arrays: ClassVar[dict[str, str]] = {"committed_agent": I32, "committed_control": I32}
     state: bytes
     forecast: bytes
+    #: The controls committed so far in the state's minute, by agent: a rejoining agent's predecessors.
+    committed_agent: np.ndarray
+    committed_control: np.ndarray
+
+    def __post_init__(self) -> None:
+        if len(self.committed_agent) != len(self.committed_control):
+            raise ValueError("snapshot: committed_agent and committed_control differ in length")
 
 
 @dataclass(frozen=True)
@@ -248,8 +256,17 @@ class Control(Message):
 
 
 @dataclass(frozen=True)
+class Ack(Message):
+    """Agent ``agent`` holds the state of minute ``t``: a suspect agent is waited for again once it acks the current minute."""
+
+    kind: ClassVar[str] = "ack"
+    t: int
+    agent: int
+
+
+@dataclass(frozen=True)
 class Stop(Message):
-    """The run is over (or aborted): agents leave."""
+    """The run is over: ``reason`` is ``done`` after the last minute, anything else says why it ended at minute ``t``."""
 
     kind: ClassVar[str] = "stop"
     t: int

@@ -29,15 +29,20 @@ from coordinator.args import hour, iso_date, positive, rollout_options, scenario
 from coordinator.runtime import FleetConfig
 
 
-def _agent_entry(index: int, run: str, bus: SessionArgs, join_timeout_s: float, data_dir: str | None = None) -> None:
+def _agent_entry(index: int, run: str, bus: SessionArgs, join_timeout_s: float, data_dir: str | None = None,
+                 grace_s: float = 30.0) -> None:
     from agents.taxi import AgentConfig, agent_main
 
-    sys.exit(agent_main(AgentConfig(index=index, run=run, bus=bus, join_timeout_s=join_timeout_s, data_dir=data_dir)))
+    sys.exit(agent_main(AgentConfig(index=index, run=run, bus=bus, join_timeout_s=join_timeout_s, data_dir=data_dir,
+                                    grace_s=grace_s)))
 
 
 def _coordinator_entry(cfg: FleetConfig, bus: SessionArgs, result_path: str) -> None:
+    import signal
+
     from coordinator.runtime import coordinator_main
 
+    signal.signal(signal.SIGTERM, lambda signum, _: sys.exit(128 + signum))  # unwinds, so the run's stop goes out
     try:
         coordinator_main(cfg, bus, result_path)
     except SurgeError as exc:
@@ -99,8 +104,8 @@ def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeo
                             name="surge-coordinator")
         coord.start()
         procs.append(coord)
-        agents = [ctx.Process(target=_agent_entry, args=(i, cfg.run, client.as_identity(taxi_name(i)), cfg.join_timeout_s),
-                              name=f"surge-agent-{i}") for i in range(cfg.taxis)]
+        agents = [ctx.Process(target=_agent_entry, args=(i, cfg.run, client.as_identity(taxi_name(i)), cfg.join_timeout_s, None,
+                                                         cfg.grace_s), name=f"surge-agent-{i}") for i in range(cfg.taxis)]
         for p in agents:
             p.start()
         procs.extend(agents)
@@ -143,7 +148,14 @@ def _fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  #
                    help="least wall seconds per simulated minute (default 0: as fast as the agents plan; 60: real time)")
     p.add_argument("--predictor", action="store_true",
                    help="take each hour's forecast from a `surge predictor serve` process on the bus (surge fleet starts one)")
+    p.add_argument("--partition-timeout", type=float, default=120.0,
+                   help="seconds the clock waits for most of the fleet to come back after a partition before the run ends")
     p.add_argument("--json", default=None, help="write the run's result here")
+
+
+def _grace_arg(p) -> None:  # noqa: ANN001
+    p.add_argument("--grace", type=float, default=30.0,
+                   help="seconds an agent waits for a vanished coordinator (a restart, `--resume`) before it leaves")
 
 
 def fleet_config(args) -> FleetConfig:  # noqa: ANN001
@@ -155,12 +167,15 @@ def fleet_config(args) -> FleetConfig:  # noqa: ANN001
     name, options = parse_policy(args.policy)
     FleetConfig(policy=name).policy_class()
     options = {**rollout_options(args, [args.policy]).get(args.policy, {}), **options}
-    if args.deadline <= 0 or args.join_timeout <= 0 or args.minute_seconds < 0:
-        raise ConfigError("--deadline and --join-timeout must be positive, --minute-seconds not negative")
+    if args.deadline <= 0 or args.join_timeout <= 0 or args.minute_seconds < 0 or args.partition_timeout <= 0:
+        raise ConfigError("--deadline, --join-timeout and --partition-timeout must be positive, --minute-seconds not negative")
+    if getattr(args, "grace", 1.0) <= 0:
+        raise ConfigError("--grace must be positive")
     return FleetConfig(run=args.run, scenario=args.scenario, data_dir=args.data, date=args.date, hour=args.hour,
                        minutes=args.minutes, taxis=args.taxis, seed=args.seed, world_seed=args.world_seed, policy=name,
                        options=options, deadline_s=args.deadline, join_timeout_s=args.join_timeout,
-                       minute_s=args.minute_seconds, predictor=args.predictor)
+                       minute_s=args.minute_seconds, predictor=args.predictor, partition_timeout_s=args.partition_timeout,
+                       grace_s=getattr(args, "grace", 30.0))
 
 
 def _print_result(result: dict, path: str | None) -> None:
@@ -234,9 +249,29 @@ def cmd_coordinator(args) -> int:  # noqa: ANN001
     from bus.session import session_args
     from coordinator.runtime import coordinator_main
 
-    result = coordinator_main(fleet_config(args), session_args(args, identity="coordinator"))
+    bus = session_args(args, identity="coordinator")
+    if args.resume is not None:
+        cfg = resumed_config(args.resume)
+        run_dir = args.resume
+    else:
+        cfg, run_dir = fleet_config(args), args.run_dir
+    result = coordinator_main(cfg, bus, run_dir=run_dir, resume=args.resume is not None)
     _print_result(result, args.json)
     return 0
+
+
+def resumed_config(run_dir: str) -> FleetConfig:
+    """The config of the run checkpointed in ``run_dir``: a resumed run is the same run."""
+    import dataclasses
+
+    from coordinator.checkpoint import CHECKPOINT, read_config
+
+    raw = read_config(Path(run_dir))
+    names = {f.name for f in dataclasses.fields(FleetConfig)}
+    unknown = sorted(set(raw) - names)
+    if unknown:
+        raise ConfigError(f"{Path(run_dir) / CHECKPOINT}: field 'config' has unknown settings {', '.join(unknown)}")
+    return FleetConfig(**raw)
 
 
 def parse_ids(text: str) -> list[int]:
@@ -267,8 +302,10 @@ def cmd_agents(args) -> int:  # noqa: ANN001
 
     warm_up()  # compile once here, not in every agent at once
     ctx = mp.get_context("spawn")
-    procs = [ctx.Process(target=_agent_entry, args=(i, args.run, bus.as_identity(taxi_name(i)), args.join_timeout, args.data),
-                         name=f"surge-agent-{i}") for i in ids]
+    if args.grace <= 0:
+        raise ConfigError("--grace must be positive")
+    procs = [ctx.Process(target=_agent_entry, args=(i, args.run, bus.as_identity(taxi_name(i)), args.join_timeout, args.data,
+                                                    args.grace), name=f"surge-agent-{i}") for i in ids]
     print(f"starting {len(procs)} agent processes for run {args.run!r}", file=sys.stderr, flush=True)
     for p in procs:
         p.start()
@@ -309,6 +346,7 @@ def add_parsers(sub) -> None:  # noqa: ANN001
 
     p = sub.add_parser("fleet", help="the local multi-process fleet: router, coordinator and one process per taxi on loopback")
     _fleet_args(p, taxis=8, minutes=20, samples=None)
+    _grace_arg(p)
     p.add_argument("--check", action="store_true", help="also run the instance in-process and compare the decisions")
     add_security_args(p)
     p.set_defaults(func=cmd_fleet)
@@ -331,6 +369,10 @@ def add_parsers(sub) -> None:  # noqa: ANN001
     c = sub.add_parser("coordinator", help="the clock and world of a distributed run; agents join it over zenoh")
     add_session_args(c)
     _fleet_args(c, taxis=8, minutes=60, samples=None)
+    c.add_argument("--run-dir", default=None, metavar="DIR",
+                   help="checkpoint the run here after each minute, so that `--resume DIR` can continue it")
+    c.add_argument("--resume", default=None, metavar="RUN_DIR",
+                   help="continue the run checkpointed in RUN_DIR (its settings come from the checkpoint; the bus flags apply)")
     c.set_defaults(func=cmd_coordinator)
 
     a = sub.add_parser("agents", help="start agent processes (one per taxi) that join a run over zenoh")
@@ -339,4 +381,5 @@ def add_parsers(sub) -> None:  # noqa: ANN001
     a.add_argument("--ids", required=True, help="taxi indices to run here, e.g. 0-49 or 0-3,8")
     a.add_argument("--join-timeout", type=float, default=120.0, help="seconds to wait for the coordinator")
     a.add_argument("--data", default=None, help="this host's copy of the data directory, if not at the coordinator's path")
+    _grace_arg(a)
     a.set_defaults(func=cmd_agents)

@@ -23,19 +23,22 @@ import datetime as dt
 import sys
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from agents.base import EpisodeContext, make_policy, policy_class
 from agents.rollout import RolloutConfig, RolloutPolicy, base_controls, candidate_controls
-from bus.checks import Bounds, Rejections, check_choice, check_control, check_forecast
+from bus.checks import Bounds, Rejections, check_ack, check_choice, check_control, check_forecast
 from bus.delta import state_message
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
-from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
+from bus.wire import Ack, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
 from city.errors import ConfigError
 from city.sim import FleetSim, Observation, Requests, decisions_hash
+from coordinator import checkpoint
+from coordinator.faults import ACK_WAIT_S, RESEND_S, SETTLE_S, Health, PartitionError
 
 
 @dataclass(frozen=True)
@@ -59,6 +62,10 @@ class FleetConfig:
     minute_s: float = 0.0
     #: Ask a ``surge predictor serve`` process on the bus for each hour's forecast instead of computing it here.
     predictor: bool = False
+    #: Seconds the clock waits for the agents of a partition to come back before the run ends.
+    partition_timeout_s: float = 120.0
+    #: Seconds the launcher's agents wait for a vanished coordinator (to be resumed) before they leave.
+    grace_s: float = 30.0
 
     def instance(self) -> tuple[Any, Requests, np.ndarray, EpisodeContext]:
         """The scenario, requests, start positions and episode context of this run: one place for both runs that must agree."""
@@ -102,7 +109,7 @@ def log(message: str) -> None:
 class Coordinator:
     """Runs one episode over the bus; :meth:`run` returns its metrics and decisions."""
 
-    def __init__(self, config: FleetConfig, progress: bool = True) -> None:
+    def __init__(self, config: FleetConfig, progress: bool = True, run_dir: str | Path | None = None, resume: bool = False) -> None:
         self.cfg = config
         self.keys = Keys(config.run)
         self.progress = progress
@@ -120,9 +127,24 @@ class Coordinator:
         self.spec = RunSpec(run=config.run, scenario=config.scenario, data_dir=config.data_dir, city=self.city.summary(), taxis=config.taxis,
                             minutes=config.minutes, policy=config.policy, rollout=asdict(self.rollout),
                             deadline_s=config.deadline_s)
-        self.alive: set[int] = set()
+        self.health = Health(config.taxis, log)
         self.forecast_msg = b""
-        self.stale = 0
+        #: Where the run's checkpoint is written each minute (``None``: nowhere).
+        self.run_dir = None if run_dir is None else Path(run_dir)
+        self.tally = checkpoint.Tally.fresh(config.minutes, config.taxis)
+        if resume:
+            if self.run_dir is None:
+                raise ConfigError("resuming a run needs its run directory")
+            self.tally = checkpoint.restore(self.run_dir, self.sim, config.minutes)
+            if self.sim.state.t >= config.minutes:
+                raise ConfigError(f"{self.run_dir / checkpoint.CHECKPOINT}: run {config.run!r} finished "
+                                  f"(minute {config.minutes} of {config.minutes}); nothing to resume")
+            log(f"resuming run {config.run!r} at minute {self.sim.state.t} from {self.run_dir / checkpoint.CHECKPOINT}")
+        #: Whether every agent has joined once: later token changes are departures and returns.
+        self.running = False
+        #: The controls committed so far in the current minute, for snapshots, and the agents alive when it began.
+        self.minute_commits: dict[int, int] = {}
+        self.minute_alive: set[int] = set()
         self.bounds = Bounds(taxis=config.taxis, nodes=self.city.n_nodes, sectors=self.city.n_sectors, minutes=config.minutes)
         self.rejected = Rejections(log)
         #: The minute being played, against which proposed controls are checked.
@@ -142,18 +164,18 @@ class Coordinator:
             return None
 
     def _handle_one(self, tag: str, key: str, payload: object, want: tuple[int, int] | None) -> Control | None:
+        current = None if self.obs is None else int(self.obs.t)
         if tag == "alive":
             agent = Keys.agent_of(key)
             if agent is None or not 0 <= agent < self.cfg.taxis:
                 raise WireError(f"{key}: a liveliness token of no agent of this run's {self.cfg.taxis}")
-            if payload:
-                self.alive.add(agent)
-            else:
-                self.alive.discard(agent)
-                log(f"agent {agent} left")
+            self.health.token(agent, bool(payload), self.running)
+        elif tag == "ack":
+            msg = check_ack(decode(payload, Ack, key), key, self.bounds)  # type: ignore[arg-type]
+            self.health.ack(msg.agent, msg.t, current)
         elif tag in ("spec", "snapshot"):
             try:
-                answer = self.spec if tag == "spec" else Snapshot(state=self.full_state(), forecast=self.forecast_msg)
+                answer = self.spec if tag == "spec" else self._snapshot()
                 payload.reply(key, answer.encode())  # type: ignore[attr-defined]
             finally:
                 payload.drop()  # type: ignore[attr-defined]  # ends the asker's get() now, not when the query is collected
@@ -163,60 +185,90 @@ class Coordinator:
                 raise WireError(f"{key}: a proposed control must say by='agent', not {c.by!r}")
             if self.obs is not None and c.t == self.obs.t:
                 check_choice(c, key, candidate_controls(self.city, self.obs, c.agent))
+                self.health.ack(c.agent, c.t, current)
             if want is not None and (c.t, c.agent) == want:
                 return c
-            self.stale += 1
+            self.tally.stale += 1
         return None
 
     def full_state(self) -> bytes:
         return state_message(self.sim.observe(), None).encode()
 
+    def _snapshot(self) -> Snapshot:
+        """The full state, the hour's forecast and the minute's commits so far: all a (re)joining agent needs."""
+        agents = sorted(self.minute_commits)
+        return Snapshot(state=self.full_state(), forecast=self.forecast_msg, committed_agent=np.array(agents, dtype=np.int32),
+                        committed_control=np.array([self.minute_commits[a] for a in agents], dtype=np.int32))
+
     # ------------------------------------------------------------------- run
     def run(self, bus: SessionArgs) -> dict:
+        """Play the episode; ``Stop`` goes out on every way out (done, an error, SIGTERM, Ctrl-C), with the reason."""
         with open_session(bus) as session:
             inbox = Inbox()
+            token = session.liveliness().declare_token(self.keys.coordinator)
+            pub_stop = publisher(session, self.keys.stop)
             decls = [
                 inbox.serve(session, self.keys.spec, "spec"),
                 inbox.serve(session, self.keys.snapshot, "snapshot"),
                 inbox.subscribe(session, self.keys.all_controls, "control"),
+                inbox.subscribe(session, self.keys.all_acks, "ack"),
                 inbox.watch_liveliness(session, self.keys.all_alive, "alive"),
             ]
+            reason = "the coordinator failed"
             try:
-                return self._run(session, inbox)
+                result = self._run(session, inbox)
+                reason = "done"
+                return result
+            except SystemExit as exc:
+                reason = f"the coordinator was stopped (exit {exc.code})"
+                raise
+            except KeyboardInterrupt:
+                reason = "the coordinator was interrupted"
+                raise
+            except Exception as exc:
+                reason = f"the coordinator failed: {exc}"[:300]
+                raise
             finally:
+                pub_stop.put(Stop(t=self.cfg.minutes if reason == "done" else int(self.sim.state.t), reason=reason).encode())
+                if reason != "done":
+                    log(f"published stop at minute {self.sim.state.t}: {reason}")
                 for d in decls:
                     d.undeclare()
+                token.undeclare()
 
     def _wait_for_agents(self, inbox: Inbox) -> None:
         deadline = time.monotonic() + self.cfg.join_timeout_s
-        while len(self.alive) < self.cfg.taxis:
+        alive = self.health.alive
+        while len(alive) < self.cfg.taxis:
             left = deadline - time.monotonic()
             if left <= 0:
-                missing = sorted(set(range(self.cfg.taxis)) - self.alive)
-                raise ConfigError(f"run {self.cfg.run!r}: {len(self.alive)} of {self.cfg.taxis} agents joined within "
+                missing = sorted(set(range(self.cfg.taxis)) - alive)
+                raise ConfigError(f"run {self.cfg.run!r}: {len(alive)} of {self.cfg.taxis} agents joined within "
                                   f"{self.cfg.join_timeout_s:.0f} s; missing {', '.join(map(str, missing[:10]))}")
             item = inbox.get(timeout=min(left, 1.0))
             if item is not None:
                 self._handle(item)
+        self.running = True
         log(f"all {self.cfg.taxis} agents joined run {self.cfg.run!r}")
 
     def _run(self, session, inbox: Inbox) -> dict:  # noqa: ANN001
         cfg, keys = self.cfg, self.keys
-        pub_state, pub_forecast, pub_stop = (publisher(session, k) for k in (keys.state, keys.forecast, keys.stop))
+        pub_state, pub_forecast = (publisher(session, k) for k in (keys.state, keys.forecast))
         turn_pub = {a: publisher(session, keys.turn(a)) for a in range(cfg.taxis)}
         commit_pub = {a: publisher(session, keys.committed(a)) for a in range(cfg.taxis)}
         self._wait_for_agents(inbox)
-        controls = np.zeros((cfg.minutes, cfg.taxis), dtype=np.int32)
-        costs, step_s, plan_s = [], [], []
-        planned = np.zeros(cfg.taxis, dtype=np.int64)
-        fallbacks = np.zeros(cfg.taxis, dtype=np.int64)
-        rss = np.zeros(cfg.taxis)
+        tally = self.tally
+        controls, costs, step_s, plan_s = tally.controls, tally.costs, tally.step_s, tally.plan_s
+        planned, fallbacks, rss = tally.planned, tally.fallbacks, tally.rss
         previous = None
+        first = int(self.sim.state.t)
         t_start = time.perf_counter()
-        for t in range(cfg.minutes):
+        for t in range(first, cfg.minutes):
             t0 = time.perf_counter()
             obs = self.obs = self.sim.observe()
-            if t % 60 == 0:
+            self.minute_commits = {}
+            self.minute_alive = set(self.health.alive)
+            if t % 60 == 0 or t == first:
                 self.forecast_msg = self._forecast(session, inbox, t // 60)
                 pub_forecast.put(self.forecast_msg)
             pub_state.put(state_message(obs, previous).encode())
@@ -236,15 +288,17 @@ class Coordinator:
                     rss[agent] = max(rss[agent], got.rss_mb)
                     commit = got
                 commit_pub[agent].put(commit.encode())
+                self.minute_commits[agent] = int(u[agent])
             controls[t] = u
             costs.append(self.sim.step(u))
             step_s.append(time.perf_counter() - t0)
+            if self.run_dir is not None:
+                checkpoint.save(self.run_dir, asdict(cfg), self.sim, tally)
             if self.progress:
                 free = int((obs.tau == 0).sum())
                 log(f"minute {t + 1}/{cfg.minutes}: {free} free {'taxi' if free == 1 else 'taxis'} took turns, "
                     f"{costs[-1]} requests waiting ({step_s[-1]:.2f} s)")
             self._pace(inbox, t0 + cfg.minute_s)
-        pub_stop.put(Stop(t=cfg.minutes).encode())
         res = self.sim.result(costs, controls, step_s)
         return {
             "run": cfg.run,
@@ -260,13 +314,14 @@ class Coordinator:
             "planned_per_agent": planned.tolist(),
             "fallbacks_per_agent": fallbacks.tolist(),
             "controls": controls.tolist(),
-            "stale_messages": self.stale,
+            "stale_messages": tally.stale,
             "rejected_messages": dict(self.rejected.counts),
             "step_seconds": {"median": float(np.median(step_s)), "max": float(np.max(step_s))},
             "agent_plan_seconds": {"median": float(np.median(plan_s)) if plan_s else None,
                                    "max": float(np.max(plan_s)) if plan_s else None},
             "agent_peak_rss_mb": float(rss.max()),
             "wall_seconds": time.perf_counter() - t_start,
+            "resumed_at_minute": first if first else None,
         }
 
     def _forecast(self, session, inbox: Inbox, hour: int) -> bytes:  # noqa: ANN001
@@ -307,31 +362,82 @@ class Coordinator:
                 self._handle(item)
 
     def _turn(self, inbox: Inbox, pub, t: int, agent: int) -> Control | None:  # noqa: ANN001
-        """Give ``agent`` its turn and wait for one of its controls until the deadline or its departure."""
-        if agent not in self.alive:
+        """Give ``agent`` its turn and wait for one of its controls until the deadline or its departure.
+
+        A suspect agent's turn is sent but not waited for.  A departure that
+        turns out to be a partition pauses the clock, and the turn starts
+        over once the agents are back.  The turn is re-sent every
+        :data:`~coordinator.faults.RESEND_S` seconds; an agent answers a turn
+        it has planned with the control it sent.
+        """
+        health = self.health
+        if agent not in health.alive and not self._partition(inbox, t):
             return None
-        pub.put(Turn(t=t, agent=agent).encode())
-        deadline = time.monotonic() + self.cfg.deadline_s
-        while agent in self.alive:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                log(f"minute {t}: agent {agent} silent for {self.cfg.deadline_s:g} s; base control used")
+        turn = Turn(t=t, agent=agent).encode()
+        pub.put(turn)
+        if agent in health.suspect:
+            return None
+        deadline, sent = time.monotonic() + self.cfg.deadline_s, time.monotonic()
+        while True:
+            if agent not in health.alive:
+                if not self._partition(inbox, t):
+                    log(f"minute {t}: agent {agent} is gone; base control used")
+                    return None
+                pub.put(turn)
+                deadline, sent = time.monotonic() + self.cfg.deadline_s, time.monotonic()
+            now = time.monotonic()
+            if now >= deadline:
+                health.missed(agent, t, self.cfg.deadline_s)
                 return None
-            item = inbox.get(timeout=left)
+            if now - sent >= RESEND_S:
+                pub.put(turn)
+                sent = now
+            item = inbox.get(timeout=min(deadline - now, sent + RESEND_S - now))
             if item is not None:
                 got = self._handle(item, want=(t, agent))
                 if got is not None:
                     return got
-        log(f"minute {t}: agent {agent} is gone; base control used")
-        return None
+
+    def _partition(self, inbox: Inbox, t: int) -> bool:
+        """Whether the fleet is partitioned, after letting a burst of departures arrive; if so, wait until it heals.
+
+        ``False``: the departures are those of single agents, and the run goes
+        on without them.  ``True``: the agents alive at the start of the
+        partition are back and hold minute ``t`` (or the ack wait ran out).
+        """
+        health = self.health
+        while (left := health.last_departure + SETTLE_S - time.monotonic()) > 0:
+            self._pace(inbox, time.perf_counter() + left)
+        if not health.partitioned():
+            return False
+        expected = set(self.minute_alive)
+        for a in expected:
+            health.acked.pop(a, None)  # the acks that count are those of the agents' snapshots after the partition
+        timeout = self.cfg.partition_timeout_s
+        log(f"minute {t}: partition: {self.cfg.taxis - len(health.alive)} of {self.cfg.taxis} agents' tokens are gone; "
+            f"the clock pauses until they return (at most {timeout:g} s)")
+        start = time.monotonic()
+        acked_by = None
+        while True:
+            back, acked = health.healed(expected, t)
+            now = time.monotonic()
+            if back and acked_by is None:
+                acked_by = now + ACK_WAIT_S
+            if acked or (acked_by is not None and now >= acked_by):
+                log(f"minute {t}: partition healed after {now - start:.1f} s: {len(health.alive)} agents back; minute {t} goes on")
+                return True
+            if now - start >= timeout:
+                raise PartitionError(f"run {self.cfg.run!r}: partition at minute {t}: {len(expected & health.alive)} of "
+                                     f"{len(expected)} agents returned within {timeout:g} s; the run ends")
+            self._pace(inbox, time.perf_counter() + 0.2)
 
 
-def coordinator_main(config: FleetConfig, bus: SessionArgs, result_path: str | None = None) -> dict:
-    """Run the coordinator; with ``result_path``, write the result there as JSON (for a launcher)."""
+def coordinator_main(config: FleetConfig, bus: SessionArgs, result_path: str | None = None, run_dir: str | None = None,
+                     resume: bool = False) -> dict:
+    """Run the coordinator (checkpointing to ``run_dir``, resuming from it); with ``result_path``, write the result there as JSON."""
     import json
-    from pathlib import Path
 
-    result = Coordinator(config).run(bus)
+    result = Coordinator(config, run_dir=run_dir, resume=resume).run(bus)
     if result_path is not None:
         Path(result_path).write_text(json.dumps(result, indent=1))
     return result

@@ -14,7 +14,7 @@ from agents.greedy import greedy_controls
 from bus.delta import StateView, state_message
 from bus.keys import Keys
 from bus.session import DEFAULT_ENDPOINT, DEFAULT_TLS_ENDPOINT, INSECURE_WARNING, SessionArgs, add_session_args, session_args
-from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
+from bus.wire import Ack, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
 from city.errors import ConfigError
 from city.sim import FleetSim
 from coordinator.evaluate import episode_requests, initial_positions
@@ -33,8 +33,12 @@ def test_every_message_round_trips_exactly() -> None:
     assert decode(spec.encode(), RunSpec) == spec
     for msg in (Turn(t=3, agent=2), Control(t=3, agent=2, control=-1, by="base", plan_s=0.25), Stop(t=9)):
         assert decode(msg.encode(), type(msg)) == msg
-    snap = Snapshot(state=b"abc", forecast=fc.encode())
-    assert decode(snap.encode(), (Turn, Snapshot)) == snap
+    snap = Snapshot(state=b"abc", forecast=fc.encode(), committed_agent=np.array([0, 2], np.int32),
+                    committed_control=np.array([-1, 7], np.int32))
+    back = decode(snap.encode(), (Turn, Snapshot))
+    assert (back.state, back.forecast) == (snap.state, snap.forecast)
+    assert back.committed_agent.tolist() == [0, 2] and back.committed_control.tolist() == [-1, 7]
+    assert decode(Ack(t=4, agent=1).encode(), Ack) == Ack(t=4, agent=1)
 
 
 @pytest.mark.parametrize(
