@@ -41,6 +41,8 @@ class Tally:
     fallbacks: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     rss: np.ndarray = field(default_factory=lambda: np.zeros(0))
     stale: int = 0
+    #: ``[minute, agent]`` of each turn the base control filled.
+    fallen: list[list[int]] = field(default_factory=list)
 
     @staticmethod
     def fresh(minutes: int, taxis: int) -> Tally:
@@ -58,7 +60,7 @@ def save(run_dir: Path, config: dict, sim: FleetSim, tally: Tally) -> Path:
         "sim": {"pos": s.pos.tolist(), "tau": s.tau.tolist(), "dest": s.dest.tolist(), "picked_at": s.picked_at.tolist()},
         "tally": {"controls": tally.controls[: s.t].tolist(), "costs": tally.costs, "step_s": tally.step_s,
                   "plan_s": tally.plan_s, "planned": tally.planned.tolist(), "fallbacks": tally.fallbacks.tolist(),
-                  "rss": tally.rss.tolist(), "stale": tally.stale},
+                  "rss": tally.rss.tolist(), "stale": tally.stale, "fallen": tally.fallen},
     }
     run_dir.mkdir(parents=True, exist_ok=True)
     path = run_dir / CHECKPOINT
@@ -87,7 +89,7 @@ def restore(run_dir: Path, sim: FleetSim, minutes: int) -> Tally:
         tally = Tally(controls=controls, costs=[int(c) for c in tal["costs"]], step_s=[float(x) for x in tal["step_s"]],
                       plan_s=[float(x) for x in tal["plan_s"]], planned=np.asarray(tal["planned"], dtype=np.int64),
                       fallbacks=np.asarray(tal["fallbacks"], dtype=np.int64), rss=np.asarray(tal["rss"], dtype=float),
-                      stale=int(tal["stale"]))
+                      stale=int(tal["stale"]), fallen=[[int(t), int(a)] for t, a in tal["fallen"]])
     except (KeyError, TypeError, ValueError) as exc:
         raise DataError(f"not a checkpoint of this version ({type(exc).__name__}: {exc})", path=path) from None
     if state.pos.shape != (taxis,) or state.tau.shape != (taxis,) or state.dest.shape != (taxis,):

@@ -205,7 +205,6 @@ class Coordinator:
         """Play the episode; ``Stop`` goes out on every way out (done, an error, SIGTERM, Ctrl-C), with the reason."""
         with open_session(bus) as session:
             inbox = Inbox()
-            token = session.liveliness().declare_token(self.keys.coordinator)
             pub_stop = publisher(session, self.keys.stop)
             decls = [
                 inbox.serve(session, self.keys.spec, "spec"),
@@ -214,6 +213,7 @@ class Coordinator:
                 inbox.subscribe(session, self.keys.all_acks, "ack"),
                 inbox.watch_liveliness(session, self.keys.all_alive, "alive"),
             ]
+            token = session.liveliness().declare_token(self.keys.coordinator)  # once the snapshot it stands for is served
             reason = "the coordinator failed"
             try:
                 result = self._run(session, inbox)
@@ -279,6 +279,7 @@ class Coordinator:
                 got = self._turn(inbox, turn_pub[agent], t, agent)
                 if got is None:
                     fallbacks[agent] += 1
+                    tally.fallen.append([t, agent])
                     u[agent] = base[agent]
                     commit = Control(t=t, agent=agent, control=int(base[agent]), by="base")
                 else:
@@ -313,6 +314,7 @@ class Coordinator:
             "fallbacks": int(fallbacks.sum()),
             "planned_per_agent": planned.tolist(),
             "fallbacks_per_agent": fallbacks.tolist(),
+            "fallback_turns": tally.fallen,
             "controls": controls.tolist(),
             "stale_messages": tally.stale,
             "rejected_messages": dict(self.rejected.counts),
