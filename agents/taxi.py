@@ -252,7 +252,11 @@ class TaxiAgent:
         elif tag == "committed":
             self._on_committed(decode(payload, Control, key), key)  # type: ignore[arg-type]
         elif tag == "turn":
-            self.pending = check_turn(decode(payload, Turn, key), key, self.me, self.bounds, self._minute())  # type: ignore[arg-type]
+            turn = decode(payload, Turn, key)
+            minute = self._minute()
+            if minute is not None and max(0, minute - 60) <= turn.t < minute and turn.agent == self.me:  # type: ignore[attr-defined]
+                return True  # a turn of a minute the run has left behind (queued while this agent was stopped)
+            self.pending = check_turn(turn, key, self.me, self.bounds, minute)  # type: ignore[arg-type]
         return True
 
     def _on_coordinator(self, session, present: bool) -> None:  # noqa: ANN001
@@ -292,8 +296,8 @@ class TaxiAgent:
         if c.t == obs.t + 1 and len(self.early) < self.bounds.taxis:
             self.early.append((c, key))  # checked once the state of minute c.t is in
             return
-        if c.t == obs.t - 1:
-            return  # a later agent's commitment of the minute before, overtaken by this minute's state: no longer needed
+        if max(0, obs.t - 60) <= c.t < obs.t:
+            return  # a commitment of a minute this agent's state has left behind (a later agent's, or one queued while it was stopped)
         check_control(c, key, self.bounds, int(obs.t))
         if obs.tau[c.agent] > 0:
             raise WireError(f"{key}: agent {c.agent} is busy at minute {obs.t}; it commits no control")

@@ -25,6 +25,8 @@ from city.errors import SurgeError
 
 #: Seconds to let a burst of departures arrive before telling one agent's loss from a partition.
 SETTLE_S = 0.5
+#: Departures this close to the latest one belong to the same partition.
+BURST_S = 5.0
 #: Seconds between re-sent turns: a turn published while the router was away, or before it knew the agent's subscriber, is lost.
 RESEND_S = 2.0
 #: Seconds to wait, once a partition's tokens are back, for those agents to acknowledge the minute (from a snapshot).
@@ -45,7 +47,9 @@ class Health:
     suspect: set[int] = field(default_factory=set)
     #: The latest minute each agent acknowledged.
     acked: dict[int, int] = field(default_factory=dict)
-    #: When the last token went (monotonic seconds).
+    #: When each agent's token last went (monotonic seconds).
+    departed: dict[int, float] = field(default_factory=dict)
+    #: When the last token went.
     last_departure: float = float("-inf")
 
     def token(self, agent: int, present: bool, running: bool) -> None:
@@ -56,7 +60,7 @@ class Health:
             self.alive.add(agent)
         elif agent in self.alive:
             self.alive.discard(agent)
-            self.last_departure = time.monotonic()
+            self.last_departure = self.departed[agent] = time.monotonic()
             self.log(f"agent {agent} left")
 
     def ack(self, agent: int, t: int, current: int | None) -> None:
@@ -74,6 +78,10 @@ class Health:
     def partitioned(self) -> bool:
         """Most of the fleet's tokens are gone."""
         return 2 * len(self.alive) < self.taxis
+
+    def partition(self) -> set[int]:
+        """The agents of the current partition: those alive, and those gone in the burst of departures that made it."""
+        return self.alive | {a for a, when in self.departed.items() if when >= self.last_departure - BURST_S and a not in self.alive}
 
     def healed(self, expected: set[int], t: int) -> tuple[bool, bool]:
         """(every agent of ``expected`` is back, and each of them has acknowledged minute ``t``)."""

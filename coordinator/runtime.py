@@ -142,9 +142,8 @@ class Coordinator:
             log(f"resuming run {config.run!r} at minute {self.sim.state.t} from {self.run_dir / checkpoint.CHECKPOINT}")
         #: Whether every agent has joined once: later token changes are departures and returns.
         self.running = False
-        #: The controls committed so far in the current minute, for snapshots, and the agents alive when it began.
+        #: The controls committed so far in the current minute, for snapshots.
         self.minute_commits: dict[int, int] = {}
-        self.minute_alive: set[int] = set()
         self.bounds = Bounds(taxis=config.taxis, nodes=self.city.n_nodes, sectors=self.city.n_sectors, minutes=config.minutes)
         self.rejected = Rejections(log)
         #: The minute being played, against which proposed controls are checked.
@@ -267,7 +266,6 @@ class Coordinator:
             t0 = time.perf_counter()
             obs = self.obs = self.sim.observe()
             self.minute_commits = {}
-            self.minute_alive = set(self.health.alive)
             if t % 60 == 0 or t == first:
                 self.forecast_msg = self._forecast(session, inbox, t // 60)
                 pub_forecast.put(self.forecast_msg)
@@ -412,7 +410,7 @@ class Coordinator:
             self._pace(inbox, time.perf_counter() + left)
         if not health.partitioned():
             return False
-        expected = set(self.minute_alive)
+        expected = health.partition()
         for a in expected:
             health.acked.pop(a, None)  # the acks that count are those of the agents' snapshots after the partition
         timeout = self.cfg.partition_timeout_s

@@ -261,10 +261,11 @@ def test_health_tells_a_partition_from_single_departures() -> None:
         h.token(a, True, running=False)
     h.token(3, False, running=True)
     assert not h.partitioned() and said == ["agent 3 left"]
+    h.departed[3] -= 60  # long gone: not one of the partition's
     h.token(2, False, running=True)
     assert not h.partitioned()
     h.token(1, False, running=True)
-    assert h.partitioned()
+    assert h.partitioned() and h.partition() == {0, 1, 2}
     assert h.healed({0, 1, 2}, 5) == (False, False)
     h.token(1, True, running=True)
     h.token(2, True, running=True)
