@@ -264,8 +264,9 @@ class Coordinator:
         t_start = time.perf_counter()
         for t in range(first, cfg.minutes):
             t0 = time.perf_counter()
+            if self.health.partitioned():
+                self._partition(inbox, t)  # the clock does not run while most of the fleet is cut off
             obs = self.obs = self.sim.observe()
-            self.minute_commits = {}
             if t % 60 == 0 or t == first:
                 self.forecast_msg = self._forecast(session, inbox, t // 60)
                 pub_forecast.put(self.forecast_msg)
@@ -290,6 +291,7 @@ class Coordinator:
                 self.minute_commits[agent] = int(u[agent])
             controls[t] = u
             costs.append(self.sim.step(u))
+            self.minute_commits = {}  # a snapshot between minutes holds the next minute's state, with nothing committed yet
             step_s.append(time.perf_counter() - t0)
             if self.run_dir is not None:
                 checkpoint.save(self.run_dir, asdict(cfg), self.sim, tally)
