@@ -167,10 +167,10 @@ def fleet_config(args) -> FleetConfig:  # noqa: ANN001
     name, options = parse_policy(args.policy)
     FleetConfig(policy=name).policy_class()
     options = {**rollout_options(args, [args.policy]).get(args.policy, {}), **options}
-    if args.deadline <= 0 or args.join_timeout <= 0 or args.minute_seconds < 0 or args.partition_timeout <= 0:
-        raise ConfigError("--deadline, --join-timeout and --partition-timeout must be positive, --minute-seconds not negative")
-    if getattr(args, "grace", 1.0) <= 0:
-        raise ConfigError("--grace must be positive")
+    if args.deadline <= 0 or args.join_timeout <= 0 or args.minute_seconds < 0:
+        raise ConfigError("--deadline and --join-timeout must be positive, --minute-seconds not negative")
+    if args.partition_timeout <= 0 or getattr(args, "grace", 1.0) <= 0:
+        raise ConfigError("--partition-timeout and --grace must be positive")
     return FleetConfig(run=args.run, scenario=args.scenario, data_dir=args.data, date=args.date, hour=args.hour,
                        minutes=args.minutes, taxis=args.taxis, seed=args.seed, world_seed=args.world_seed, policy=name,
                        options=options, deadline_s=args.deadline, join_timeout_s=args.join_timeout,
@@ -249,12 +249,11 @@ def cmd_coordinator(args) -> int:  # noqa: ANN001
     from bus.session import session_args
     from coordinator.runtime import coordinator_main
 
-    bus = session_args(args, identity="coordinator")
     if args.resume is not None:
-        cfg = resumed_config(args.resume)
-        run_dir = args.resume
+        cfg, run_dir = resumed_config(args.resume), args.resume
     else:
         cfg, run_dir = fleet_config(args), args.run_dir
+    bus = session_args(args, identity="coordinator")
     result = coordinator_main(cfg, bus, run_dir=run_dir, resume=args.resume is not None)
     _print_result(result, args.json)
     return 0

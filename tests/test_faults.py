@@ -24,7 +24,8 @@ import pytest
 from bus.certs import make_certs
 from bus.router import free_tcp_port, wait_for_tcp
 from city.errors import DataError
-from coordinator.faults import Health
+from bus.session import Inbox
+from coordinator.faults import Health, PartitionError
 
 CLI = [sys.executable, "-m", "coordinator.cli"]
 pytestmark = pytest.mark.usefixtures("compiled_kernels")
@@ -284,7 +285,7 @@ def test_a_checkpoint_restores_the_run_and_a_bad_one_is_one_line(tmp_path: Path)
     from coordinator import checkpoint
     from coordinator.runtime import Coordinator, FleetConfig
 
-    cfg = FleetConfig(run="ck", taxis=3, minutes=5, options={"forecast": "true-rate", "samples": 4})
+    cfg = FleetConfig(run="ck", taxis=3, minutes=5, options={"forecast": "true-rate", "samples": 4}, partition_timeout_s=0.3)
     coord = Coordinator(cfg, progress=False)
     sim, tally = coord.sim, coord.tally
     for t in range(3):
@@ -309,3 +310,7 @@ def test_a_checkpoint_restores_the_run_and_a_bad_one_is_one_line(tmp_path: Path)
     with pytest.raises(DataError, match="nothing to resume"):
         checkpoint.restore(tmp_path / "none", back.sim, cfg.minutes)
     assert back.sim.state.t == 3  # a refused checkpoint leaves the simulator as it was
+    now = time.monotonic()
+    back.health.departed, back.health.last_departure = {0: now - 0.6, 1: now - 0.6, 2: now - 0.6}, now - 0.6
+    with pytest.raises(PartitionError, match=r"^run 'ck': partition at minute 3: 0 of 3 agents returned within 0.3 s; the run ends$"):
+        back._partition(Inbox(), 3)
