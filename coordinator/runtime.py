@@ -10,6 +10,12 @@ agent rejoins from a snapshot.  With every agent answering, the decisions are
 those of the in-process policy of the same seed, bit for bit
 (``tests/test_runtime.py``).
 
+It survives faults (``tests/test_faults.py``): it holds a liveliness token
+that agents watch, publishes :class:`~bus.wire.Stop` with the reason on
+every way out, checkpoints each minute to its run directory
+(:mod:`coordinator.checkpoint`, ``--resume``), and tells a partition from
+single failures and a hung agent from a live one (:mod:`coordinator.faults`).
+
 A proposed control counts only if it is on its own agent's key, for the
 current minute, and one of that agent's candidate controls; anything else is
 dropped (the first of each kind logged) and the coordinator keeps waiting
