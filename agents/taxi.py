@@ -90,8 +90,9 @@ class TaxiAgent:
         self.decisions = 0
         self.rejected = Rejections(lambda m: log(self.me, m))
         self._cities: dict[tuple[str, str | None], object] = {}
-        #: The last control this agent sent: a repeated turn gets it again.
+        #: The last control this agent sent, and its predecessors' controls it was planned with: a repeated turn gets it again.
         self.sent: Control | None = None
+        self.sent_with = np.empty(0, dtype=np.int32)
         #: Publisher of this agent's acks (``None`` without a bus).
         self.ack_pub = None
         #: Since when the coordinator's token is missing (monotonic seconds; ``None``: present, or not watched).
@@ -329,10 +330,6 @@ class TaxiAgent:
 
     def _maybe_plan(self, out) -> None:  # noqa: ANN001
         turn, obs = self.pending, self.view.obs
-        if turn is not None and self.sent is not None and self.sent.t == turn.t:
-            out.put(self.sent.encode())  # a repeated turn: the first answer may have been lost
-            self.pending = None
-            return
         if turn is not None and obs is not None and turn.t < obs.t:
             self.pending = None  # the run has moved on without this agent's answer
             return
@@ -345,11 +342,15 @@ class TaxiAgent:
         committed = self.context.base_controls[: self.me].copy()
         for a in free_before:
             committed[a] = mine[int(a)]
+        if self.sent is not None and self.sent.t == turn.t and np.array_equal(self.sent_with, committed):
+            out.put(self.sent.encode())  # a repeated turn, with the same predecessors: the first answer may have been lost
+            self.pending = None
+            return
         t0 = time.perf_counter()
         control = plan_agent(self.context, committed, self.me)
         plan_s = time.perf_counter() - t0
         rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        self.sent = Control(t=turn.t, agent=self.me, control=int(control), plan_s=plan_s, rss_mb=rss_mb)
+        self.sent, self.sent_with = Control(t=turn.t, agent=self.me, control=int(control), plan_s=plan_s, rss_mb=rss_mb), committed
         out.put(self.sent.encode())
         self.decisions += 1
         self.pending = None

@@ -182,6 +182,7 @@ def test_router_restart_and_coordinator_resume_keep_the_uninterrupted_decisions(
     assert "resuming run 'faults' at minute" in resumed.text and result["resumed_at_minute"] >= 8
     assert all("the coordinator is back" in a.text for a in agents)
     assert result["fallbacks"] == 0 and len(result["controls"]) == minutes
+    assert "silent for" not in coord.text + resumed.text and "is gone; base control used" not in coord.text
     ref = in_process(resumed_config(str(run_dir)))
     assert result["decisions_sha256"] == ref["decisions_sha256"]
     assert result["total_cost"] == ref["total_cost"]
@@ -221,6 +222,7 @@ def test_a_killed_agent_rejoins_and_a_hung_agent_costs_one_deadline(bus: Bus, tm
     assert fallen[0] == [] and result["fallbacks_per_agent"] == [len(fallen[a]) for a in range(3)]
     assert fallen[1], "the killed agent's turns were not counted as fallbacks"
     assert "joined run 'agents'" in agents[1].text, "the restarted agent did not rejoin"
+    assert "agent 1 silent for" not in coord.text  # it took its snapshot before its token: no turn of its waited out a deadline
     assert coord.text.count("agent 2 silent for") == 1  # suspect after one deadline: no further wait, the run keeps its pace
     assert fallen[2] and min(fallen[2]) >= t_stop and max(fallen[2]) <= acked
     assert max(max(fallen[1]), acked) < minutes - 5, "too few minutes after the faults to show the agents recovered"
