@@ -312,6 +312,15 @@ def test_a_checkpoint_restores_the_run_and_a_bad_one_is_one_line(tmp_path: Path)
     with pytest.raises(DataError, match="nothing to resume"):
         checkpoint.restore(tmp_path / "none", back.sim, cfg.minutes)
     assert back.sim.state.t == 3  # a refused checkpoint leaves the simulator as it was
+    from bus.wire import Ack
+
+    back.obs = back.sim.observe()
+    back.health.missed(1, 3, 1.0)
+    for key, ack in ((back.keys.ack(2), Ack(t=3, agent=1)), (back.keys.ack(1), Ack(t=99, agent=1))):
+        back._handle(("ack", key, ack.encode()))  # another agent's key; a minute outside the episode
+    assert 1 in back.health.suspect and len(back.rejected.counts) == 2
+    back._handle(("ack", back.keys.ack(1), Ack(t=3, agent=1).encode()))
+    assert 1 not in back.health.suspect
     now = time.monotonic()
     back.health.departed, back.health.last_departure = {0: now - 0.6, 1: now - 0.6, 2: now - 0.6}, now - 0.6
     with pytest.raises(PartitionError, match=r"^run 'ck': partition at minute 3: 0 of 3 agents returned within 0.3 s; the run ends$"):
