@@ -247,13 +247,17 @@ def _nested(overrides: dict) -> dict:
 
 def cmd_coordinator(args) -> int:  # noqa: ANN001
     from bus.session import session_args
-    from coordinator.runtime import coordinator_main
+    from coordinator.runtime import coordinator_main, log
 
     if args.resume is not None:
         cfg, run_dir = resumed_config(args.resume), args.resume
     else:
-        cfg, run_dir = fleet_config(args), args.run_dir
+        from city.scenario import cache_dir
+
+        cfg = fleet_config(args)
+        run_dir = args.run_dir or str(cache_dir() / "runs" / cfg.run)
     bus = session_args(args, identity="coordinator")
+    log(f"checkpointing each minute to {run_dir}; `surge coordinator --resume {run_dir}` continues the run")
     result = coordinator_main(cfg, bus, run_dir=run_dir, resume=args.resume is not None)
     _print_result(result, args.json)
     return 0
@@ -369,7 +373,8 @@ def add_parsers(sub) -> None:  # noqa: ANN001
     add_session_args(c)
     _fleet_args(c, taxis=8, minutes=60, samples=None)
     c.add_argument("--run-dir", default=None, metavar="DIR",
-                   help="checkpoint the run here after each minute, so that `--resume DIR` can continue it")
+                   help="checkpoint the run here after each minute, so that `--resume DIR` can continue it "
+                        "(default: runs/<run> in surge's cache, $SURGE_CACHE or ~/.cache/surge)")
     c.add_argument("--resume", default=None, metavar="RUN_DIR",
                    help="continue the run checkpointed in RUN_DIR (its settings come from the checkpoint; the bus flags apply)")
     c.set_defaults(func=cmd_coordinator)
