@@ -416,9 +416,9 @@ class Coordinator:
         health = self.health
         while (left := health.last_departure + SETTLE_S - time.monotonic()) > 0:
             self._pace(inbox, time.perf_counter() + left)
-        if not health.partitioned():
-            return False
         expected = health.partition()
+        if not health.partitioned() or expected <= health.alive:
+            return False  # single departures, or a fleet worn down one agent at a time: nobody to wait for
         for a in expected:
             health.acked.pop(a, None)  # the acks that count are those of the agents' snapshots after the partition
         timeout = self.cfg.partition_timeout_s

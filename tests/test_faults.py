@@ -325,3 +325,6 @@ def test_a_checkpoint_restores_the_run_and_a_bad_one_is_one_line(tmp_path: Path)
     back.health.departed, back.health.last_departure = {0: now - 0.6, 1: now - 0.6, 2: now - 0.6}, now - 0.6
     with pytest.raises(PartitionError, match=r"^run 'ck': partition at minute 3: 0 of 3 agents returned within 0.3 s; the run ends$"):
         back._partition(Inbox(), 3)
+    back.health.departed = {a: when - 60 for a, when in back.health.departed.items()}
+    back.health.alive = {2}
+    assert back._partition(Inbox(), 4) is False  # worn down one agent at a time long ago: the clock goes on without them
