@@ -10,8 +10,8 @@
 - Losing most tokens (more than half the fleet) is a *partition*, not a
   mass failure: a restarted router or a cut link makes every token vanish
   at once, and giving every taxi its base control would race through the
-  episode.  The clock pauses instead, until the agents alive at the start
-  of the minute are back and have acknowledged it, or until the partition
+  episode.  The clock pauses instead, until the agents that left in that
+  burst are back and have acknowledged the minute, or until the partition
   timeout ends the run with one line.
 """
 

@@ -410,8 +410,8 @@ class Coordinator:
         """Whether the fleet is partitioned, after letting a burst of departures arrive; if so, wait until it heals.
 
         ``False``: the departures are those of single agents, and the run goes
-        on without them.  ``True``: the agents alive at the start of the
-        partition are back and hold minute ``t`` (or the ack wait ran out).
+        on without them.  ``True``: the agents of the partition (alive, or gone
+        in its burst) are back and hold minute ``t``, or the ack wait ran out.
         """
         health = self.health
         while (left := health.last_departure + SETTLE_S - time.monotonic()) > 0:
