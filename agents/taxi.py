@@ -16,6 +16,17 @@ a predecessor's candidate controls.  A message that fails, or whose handling
 raises anything at all, is dropped, and the first of each kind is logged; no
 message ends the agent but the run's own stop.
 
+Faults (:mod:`coordinator.faults` has the coordinator's side): the agent
+takes a snapshot before it declares its token, so a rejoining agent holds
+the minute's state when its turn comes (the turn brings the commitments).
+It acknowledges each minute's state (:class:`~bus.wire.Ack`), which is how
+a suspect agent gets waited for again.  It watches the coordinator's token:
+when the token comes back (a restarted router, a resumed coordinator) it
+takes a snapshot, since what was published meanwhile is lost; when the
+token has been gone longer than the grace period it leaves, in one line.  A turn it cannot start for
+want of its minute's state, or one it already answered, tells it what was
+lost: it takes a snapshot, or sends its control again.
+
 This module must not import torch: forecasts arrive on the bus.
 """
 
@@ -36,7 +47,7 @@ from bus.checks import (Bounds, Rejections, check_choice, check_forecast, check_
 from bus.delta import StateView
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
-from bus.wire import Control, ForecastMsg, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
+from bus.wire import Ack, Control, ForecastMsg, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
 from city.errors import ConfigError, SurgeError
 
 
@@ -50,6 +61,16 @@ class AgentConfig:
     join_timeout_s: float = 120.0
     #: This host's data directory for real maps, when it is not where the coordinator has it.
     data_dir: str | None = None
+    #: Seconds to wait for a vanished coordinator (a restart, a resume) before leaving.
+    grace_s: float = 30.0
+
+
+class CoordinatorGone(SurgeError):
+    """The coordinator's token has been gone for longer than the grace period."""
+
+
+#: Seconds a turn may wait for its minute's state before the agent takes a snapshot.
+STALL_S = 1.0
 
 
 def log(index: int, message: str) -> None:
@@ -70,6 +91,16 @@ class TaxiAgent:
         self.decisions = 0
         self.rejected = Rejections(lambda m: log(self.me, m))
         self._cities: dict[tuple[str, str | None], object] = {}
+        #: The last control this agent sent, and its predecessors' controls it was planned with: a repeated turn gets it again.
+        self.sent: Control | None = None
+        self.sent_with = np.empty(0, dtype=np.int32)
+        #: Publisher of this agent's acks (``None`` without a bus).
+        self.ack_pub = None
+        #: Since when the coordinator's token is missing (monotonic seconds; ``None``: present, or not watched).
+        self.coordinator_gone: float | None = None
+        self.coordinator_seen = False
+        #: Since when the pending turn waits for its state.
+        self.stalled: float | None = None
 
     def run(self) -> int:
         """Join the run and plan until it stops; the number of controls this agent planned."""
@@ -85,6 +116,10 @@ class TaxiAgent:
             self.bounds = Bounds(taxis=spec.taxis, nodes=self.city.n_nodes, sectors=self.city.n_sectors, minutes=spec.minutes)
             self._warm_up()
             out = publisher(session, self.keys.control(self.me))
+            self.ack_pub = publisher(session, self.keys.ack(self.me))
+            self.coordinator_gone = time.monotonic()  # until its token is seen
+            subs.append(inbox.watch_liveliness(session, self.keys.coordinator, "coordinator"))
+            self._snapshot(session)  # before the token: a rejoining agent holds the minute when its turn comes
             token = session.liveliness().declare_token(self.keys.alive(self.me))
             log(self.me, f"joined run {spec.run!r} ({spec.policy}, {spec.taxis} taxis)")
             try:
@@ -141,21 +176,30 @@ class TaxiAgent:
         return spec
 
     def _snapshot(self, session) -> None:  # noqa: ANN001
-        for reply in session.get(self.keys.snapshot, timeout=5.0):
+        """Take the coordinator's snapshot: the full state, with its base controls, and the hour's forecast."""
+        key = self.keys.snapshot
+        for reply in session.get(key, timeout=5.0):
             if reply.ok is None:
                 continue
             try:
-                snap = decode(reply.ok.payload.to_bytes(), Snapshot, self.keys.snapshot)
-                state = check_state(decode(snap.state, State, self.keys.snapshot), self.keys.snapshot, self.bounds)  # type: ignore[arg-type]
+                snap = decode(reply.ok.payload.to_bytes(), Snapshot, key)
+                state = check_state(decode(snap.state, State, key), key, self.bounds)  # type: ignore[arg-type]
                 if not state.full:
-                    raise WireError(f"{self.keys.snapshot}: a snapshot's state must be full")
-                self._on_forecast(decode(snap.forecast, ForecastMsg, self.keys.snapshot))  # type: ignore[arg-type]
+                    raise WireError(f"{key}: a snapshot's state must be full")
+                if snap.forecast:  # empty before the run's first minute
+                    self._on_forecast(decode(snap.forecast, ForecastMsg, key))  # type: ignore[arg-type]
             except Exception as exc:  # a bad snapshot: drop it, try the next answer
-                self.rejected.exception("snapshot", self.keys.snapshot, exc)
+                self.rejected.exception("snapshot", key, exc)
                 continue
             self.view.apply(state)
             self.context = None
+            self._ack()
             return
+
+    def _ack(self) -> None:
+        """Tell the coordinator which minute this agent holds."""
+        if self.ack_pub is not None and self.view.obs is not None:
+            self.ack_pub.put(Ack(t=int(self.view.obs.t), agent=self.me).encode())
 
     def _on_forecast(self, msg: ForecastMsg) -> None:
         check_forecast(msg, self.keys.forecast, self.bounds)
@@ -168,19 +212,59 @@ class TaxiAgent:
     def handle(self, session, tag: str, key: str, payload: bytes) -> bool:  # noqa: ANN001
         """Check and apply one message; ``False`` when it is the run's stop."""
         if tag == "stop":
-            check_stop(decode(payload, Stop, key), key, self.bounds)  # type: ignore[arg-type]
+            stop = check_stop(decode(payload, Stop, key), key, self.bounds)  # type: ignore[arg-type]
+            if stop.reason != "done":
+                log(self.me, f"the coordinator ended the run at minute {stop.t}: {stop.reason}")
             return False
+        if tag == "coordinator":
+            self._on_coordinator(session, bool(payload))
+            return True
         if tag == "state":
             msg = check_state(decode(payload, State, key), key, self.bounds)  # type: ignore[arg-type]
-            if not self.view.apply(msg):
+            if self.view.apply(msg):
+                self._ack()
+            else:
                 self._snapshot(session)
             self.context = None
         elif tag == "forecast":
             self._on_forecast(decode(payload, ForecastMsg, key))  # type: ignore[arg-type]
             self.context = None
         elif tag == "turn":
-            self.pending = check_turn(decode(payload, Turn, key), key, self.me, self.bounds, self._minute())  # type: ignore[arg-type]
+            turn = decode(payload, Turn, key)
+            minute = self._minute()
+            if minute is not None and max(0, minute - 60) <= turn.t < minute and turn.agent == self.me:  # type: ignore[attr-defined]
+                return True  # a turn of a minute the run has left behind (queued while this agent was stopped)
+            self.pending = check_turn(turn, key, self.me, self.bounds, minute)  # type: ignore[arg-type]
         return True
+
+    def _on_coordinator(self, session, present: bool) -> None:  # noqa: ANN001
+        """The coordinator's token came or went; when it comes back, what was published meanwhile is lost: take a snapshot."""
+        if not self.coordinator_seen:
+            self.coordinator_seen, self.coordinator_gone = present, None if present else self.coordinator_gone
+            return
+        if not present:
+            if self.coordinator_gone is None:
+                self.coordinator_gone = time.monotonic()
+                log(self.me, f"the coordinator's token is gone; waiting up to {self.cfg.grace_s:g} s for it to return")
+            return
+        was_gone, self.coordinator_gone = self.coordinator_gone, None
+        if was_gone is not None and self.view.obs is not None:
+            log(self.me, f"the coordinator is back after {time.monotonic() - was_gone:.1f} s; taking a snapshot")
+            self._snapshot(session)
+
+    def _check_health(self, session) -> None:  # noqa: ANN001
+        """Leave when the coordinator is gone past the grace period; take a snapshot when a turn is stuck on something lost."""
+        now = time.monotonic()
+        if self.coordinator_gone is not None and now - self.coordinator_gone > self.cfg.grace_s:
+            raise CoordinatorGone(f"the coordinator of run {self.cfg.run!r} has been gone for more than {self.cfg.grace_s:g} s "
+                                  f"(the grace period); leaving")
+        if self.pending is None:
+            self.stalled = None
+        elif self.stalled is None:
+            self.stalled = now
+        elif now - self.stalled > STALL_S and self.coordinator_gone is None:
+            self.stalled = now
+            self._snapshot(session)
 
     def _predecessors(self, turn: Turn) -> np.ndarray:
         """The controls of agents ``0 … me-1`` for ``turn``: the state's base controls, with the turn's committed ones put in.
@@ -200,7 +284,8 @@ class TaxiAgent:
 
     def _loop(self, session, inbox: Inbox, out) -> None:  # noqa: ANN001
         while True:
-            item = inbox.get(timeout=1.0)
+            self._check_health(session)
+            item = inbox.get(timeout=0.25)
             if item is None:
                 continue
             tag, key, payload = item
@@ -222,15 +307,22 @@ class TaxiAgent:
 
     def _maybe_plan(self, out) -> None:  # noqa: ANN001
         turn, obs = self.pending, self.view.obs
+        if turn is not None and obs is not None and turn.t < obs.t:
+            self.pending = None  # the run has moved on without this agent's answer
+            return
         if turn is None or obs is None or obs.t != turn.t or self.context is None or self.context.obs.t != turn.t:
             return
-        self.pending = None  # a turn is planned, or dropped, once
+        self.pending = None  # a turn is planned, answered again, or dropped, once
         committed = self._predecessors(turn)
+        if self.sent is not None and self.sent.t == turn.t and np.array_equal(self.sent_with, committed):
+            out.put(self.sent.encode())  # a repeated turn, with the same predecessors: the first answer may have been lost
+            return
         t0 = time.perf_counter()
         control = plan_agent(self.context, committed, self.me)
         plan_s = time.perf_counter() - t0
         rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        out.put(Control(t=turn.t, agent=self.me, control=int(control), plan_s=plan_s, rss_mb=rss_mb).encode())
+        self.sent, self.sent_with = Control(t=turn.t, agent=self.me, control=int(control), plan_s=plan_s, rss_mb=rss_mb), committed
+        out.put(self.sent.encode())
         self.decisions += 1
 
 

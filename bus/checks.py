@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bus.keys import Keys
-from bus.wire import Control, ForecastMsg, RunSpec, State, Stop, Turn, WireError
+from bus.wire import Ack, Control, ForecastMsg, RunSpec, State, Stop, Turn, WireError
 
 #: The largest values a sane message carries: minutes a taxi stays busy, and the reported seconds and megabytes.
 MAX_BUSY = 24 * 60
@@ -126,9 +126,22 @@ def check_turn(msg: Turn, key: str, me: int, b: Bounds, t: int | None) -> Turn:
 
 
 def check_stop(msg: Stop, key: str, b: Bounds) -> Stop:
-    """The end of this run: the coordinator stops agents after the episode's last minute."""
-    if msg.t != b.minutes:
+    """The end of this run: after the episode's last minute (``done``), or earlier with the reason it was ended."""
+    if msg.reason == "done" and msg.t != b.minutes:
         raise WireError(f"{key}: field 't' is {msg.t}, the run ends after minute {b.minutes}")
+    if not 0 <= msg.t <= b.minutes:
+        raise WireError(f"{key}: field 't' is {msg.t}, outside the episode's minutes 0..{b.minutes}")
+    if len(msg.reason) > 300:
+        raise WireError(f"{key}: field 'reason' is {len(msg.reason)} characters long")
+    return msg
+
+
+def check_ack(msg: Ack, key: str, b: Bounds) -> Ack:
+    """An acknowledgement on its own agent's key, of a minute of the episode."""
+    if Keys.agent_of(key) != msg.agent or not 0 <= msg.agent < b.taxis:
+        raise WireError(f"{key}: an ack of agent {msg.agent} on another agent's key")
+    if not 0 <= msg.t <= b.minutes:
+        raise WireError(f"{key}: field 't' is {msg.t}, outside the episode's minutes 0..{b.minutes}")
     return msg
 
 

@@ -18,6 +18,8 @@ key                        who writes                  what
 ``alive/<agent>``          agent (liveliness token)    present while the agent runs
 ``predictor``              predictor (queryable)       :class:`~bus.wire.ForecastMsg` for a :class:`~bus.wire.ForecastRequest`
 ``stop``                   coordinator                 :class:`~bus.wire.Stop`
+``coordinator``            coordinator (liveliness)    present while the coordinator runs
+``ack/<agent>``            agent                       :class:`~bus.wire.Ack`: the agent holds minute ``t``'s state
 =========================  ==========================  ==============================
 """
 
@@ -64,6 +66,8 @@ SCHEME: tuple[Channel, ...] = (
     Channel("alive", True, TOKEN, TAXI, (COORDINATOR,)),
     Channel("predictor", False, QUERYABLE, PREDICTOR, (COORDINATOR,)),
     Channel("stop", False, PUB, COORDINATOR, (TAXI,)),
+    Channel("coordinator", False, TOKEN, COORDINATOR, (TAXI,)),
+    Channel("ack", True, PUB, TAXI, (COORDINATOR,)),
 )
 CHANNELS = {c.name: c for c in SCHEME}
 
@@ -100,6 +104,8 @@ class Keys:
         self.all_controls = key(self.root, "control", "*")
         self.all_committed = key(self.root, "committed", "*")
         self.all_alive = key(self.root, "alive", "*")
+        self.coordinator = key(self.root, "coordinator")
+        self.all_acks = key(self.root, "ack", "*")
 
     def turn(self, agent: int) -> str:
         return key(self.root, "turn", agent)
@@ -112,6 +118,9 @@ class Keys:
 
     def alive(self, agent: int) -> str:
         return key(self.root, "alive", agent)
+
+    def ack(self, agent: int) -> str:
+        return key(self.root, "ack", agent)
 
     @staticmethod
     def agent_of(key: str) -> int | None:

@@ -218,7 +218,7 @@ class State(Message):
 
 @dataclass(frozen=True)
 class Snapshot(Message):
-    """A full state with the current hour's forecast: how an agent joins or rejoins mid-run."""
+    """A full state with the current hour's forecast (empty before the run's first minute): how an agent joins or rejoins mid-run."""
 
     kind: ClassVar[str] = "snapshot"
     state: bytes
@@ -267,8 +267,17 @@ class Control(Message):
 
 
 @dataclass(frozen=True)
+class Ack(Message):
+    """Agent ``agent`` holds the state of minute ``t``: a suspect agent is waited for again once it acks the current minute."""
+
+    kind: ClassVar[str] = "ack"
+    t: int
+    agent: int
+
+
+@dataclass(frozen=True)
 class Stop(Message):
-    """The run is over (or aborted): agents leave."""
+    """The run is over: ``reason`` is ``done`` after the last minute, anything else says why it ended at minute ``t``."""
 
     kind: ClassVar[str] = "stop"
     t: int

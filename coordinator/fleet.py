@@ -45,15 +45,20 @@ def agent_context():  # noqa: ANN201 - a multiprocess context
     return ctx
 
 
-def _agent_entry(index: int, run: str, bus: SessionArgs, join_timeout_s: float, data_dir: str | None = None) -> None:
+def _agent_entry(index: int, run: str, bus: SessionArgs, join_timeout_s: float, data_dir: str | None = None,
+                 grace_s: float = 30.0) -> None:
     from agents.taxi import AgentConfig, agent_main
 
-    sys.exit(agent_main(AgentConfig(index=index, run=run, bus=bus, join_timeout_s=join_timeout_s, data_dir=data_dir)))
+    sys.exit(agent_main(AgentConfig(index=index, run=run, bus=bus, join_timeout_s=join_timeout_s, data_dir=data_dir,
+                                    grace_s=grace_s)))
 
 
 def _coordinator_entry(cfg: FleetConfig, bus: SessionArgs, result_path: str) -> None:
+    import signal
+
     from coordinator.runtime import coordinator_main
 
+    signal.signal(signal.SIGTERM, lambda signum, _: sys.exit(128 + signum))  # unwinds, so the run's stop goes out
     try:
         coordinator_main(cfg, bus, result_path)
     except SurgeError as exc:
@@ -120,8 +125,8 @@ def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeo
         coord.start()
         procs.append(coord)
         forks = agent_context()
-        agents = [forks.Process(target=_agent_entry, args=(i, cfg.run, client.as_identity(taxi_name(i)), cfg.join_timeout_s),
-                                name=f"surge-agent-{i}") for i in range(cfg.taxis)]
+        agents = [forks.Process(target=_agent_entry, args=(i, cfg.run, client.as_identity(taxi_name(i)), cfg.join_timeout_s, None,
+                                                           cfg.grace_s), name=f"surge-agent-{i}") for i in range(cfg.taxis)]
         launched_at = time.time()
         for p in agents:
             p.start()
@@ -169,7 +174,14 @@ def _fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  #
                    help="least wall seconds per simulated minute (default 0: as fast as the agents plan; 60: real time)")
     p.add_argument("--predictor", action="store_true",
                    help="take each hour's forecast from a `surge predictor serve` process on the bus (surge fleet starts one)")
+    p.add_argument("--partition-timeout", type=float, default=120.0,
+                   help="seconds the clock waits for most of the fleet to come back after a partition before the run ends")
     p.add_argument("--json", default=None, help="write the run's result here")
+
+
+def _grace_arg(p) -> None:  # noqa: ANN001
+    p.add_argument("--grace", type=float, default=30.0,
+                   help="seconds an agent waits for a vanished coordinator (a restart, `--resume`) before it leaves")
 
 
 def fleet_config(args) -> FleetConfig:  # noqa: ANN001
@@ -183,10 +195,13 @@ def fleet_config(args) -> FleetConfig:  # noqa: ANN001
     options = {**rollout_options(args, [args.policy]).get(args.policy, {}), **options}
     if args.deadline <= 0 or args.join_timeout <= 0 or args.minute_seconds < 0:
         raise ConfigError("--deadline and --join-timeout must be positive, --minute-seconds not negative")
+    if args.partition_timeout <= 0 or getattr(args, "grace", 1.0) <= 0:
+        raise ConfigError("--partition-timeout and --grace must be positive")
     return FleetConfig(run=args.run, scenario=args.scenario, data_dir=args.data, date=args.date, hour=args.hour,
                        minutes=args.minutes, taxis=args.taxis, seed=args.seed, world_seed=args.world_seed, policy=name,
                        options=options, deadline_s=args.deadline, join_timeout_s=args.join_timeout,
-                       minute_s=args.minute_seconds, predictor=args.predictor)
+                       minute_s=args.minute_seconds, predictor=args.predictor, partition_timeout_s=args.partition_timeout,
+                       grace_s=getattr(args, "grace", 30.0))
 
 
 def _print_result(result: dict, path: str | None) -> None:
@@ -262,11 +277,34 @@ def _nested(overrides: dict) -> dict:
 
 def cmd_coordinator(args) -> int:  # noqa: ANN001
     from bus.session import session_args
-    from coordinator.runtime import coordinator_main
+    from coordinator.runtime import coordinator_main, log
 
-    result = coordinator_main(fleet_config(args), session_args(args, identity="coordinator"))
+    if args.resume is not None:
+        cfg, run_dir = resumed_config(args.resume), args.resume
+    else:
+        from city.scenario import cache_dir
+
+        cfg = fleet_config(args)
+        run_dir = args.run_dir or str(cache_dir() / "runs" / cfg.run)
+    bus = session_args(args, identity="coordinator")
+    log(f"checkpointing each minute to {run_dir}; `surge coordinator --resume {run_dir}` continues the run")
+    result = coordinator_main(cfg, bus, run_dir=run_dir, resume=args.resume is not None)
     _print_result(result, args.json)
     return 0
+
+
+def resumed_config(run_dir: str) -> FleetConfig:
+    """The config of the run checkpointed in ``run_dir``: a resumed run is the same run."""
+    import dataclasses
+
+    from coordinator.checkpoint import CHECKPOINT, read_config
+
+    raw = read_config(Path(run_dir))
+    names = {f.name for f in dataclasses.fields(FleetConfig)}
+    unknown = sorted(set(raw) - names)
+    if unknown:
+        raise ConfigError(f"{Path(run_dir) / CHECKPOINT}: field 'config' has unknown settings {', '.join(unknown)}")
+    return FleetConfig(**raw)
 
 
 def parse_ids(text: str) -> list[int]:
@@ -289,6 +327,8 @@ def parse_ids(text: str) -> list[int]:
 def cmd_agents(args) -> int:  # noqa: ANN001
     from bus.session import session_args
 
+    if args.grace <= 0:
+        raise ConfigError("--grace must be positive")
     ids = parse_ids(args.ids)
     bus = session_args(args)
     for i in ids:
@@ -297,8 +337,8 @@ def cmd_agents(args) -> int:  # noqa: ANN001
 
     warm_up()  # compile once here, not in every agent at once
     ctx = agent_context()
-    procs = [ctx.Process(target=_agent_entry, args=(i, args.run, bus.as_identity(taxi_name(i)), args.join_timeout, args.data),
-                         name=f"surge-agent-{i}") for i in ids]
+    procs = [ctx.Process(target=_agent_entry, args=(i, args.run, bus.as_identity(taxi_name(i)), args.join_timeout, args.data,
+                                                    args.grace), name=f"surge-agent-{i}") for i in ids]
     print(f"starting {len(procs)} agent processes for run {args.run!r}", file=sys.stderr, flush=True)
     for p in procs:
         p.start()
@@ -339,6 +379,7 @@ def add_parsers(sub) -> None:  # noqa: ANN001
 
     p = sub.add_parser("fleet", help="the local multi-process fleet: router, coordinator and one process per taxi on loopback")
     _fleet_args(p, taxis=8, minutes=20, samples=None)
+    _grace_arg(p)
     p.add_argument("--check", action="store_true", help="also run the instance in-process and compare the decisions")
     add_security_args(p)
     p.set_defaults(func=cmd_fleet)
@@ -361,6 +402,11 @@ def add_parsers(sub) -> None:  # noqa: ANN001
     c = sub.add_parser("coordinator", help="the clock and world of a distributed run; agents join it over zenoh")
     add_session_args(c)
     _fleet_args(c, taxis=8, minutes=60, samples=None)
+    c.add_argument("--run-dir", default=None, metavar="DIR",
+                   help="checkpoint the run here after each minute, so that `--resume DIR` can continue it "
+                        "(default: runs/<run> in surge's cache, $SURGE_CACHE or ~/.cache/surge)")
+    c.add_argument("--resume", default=None, metavar="RUN_DIR",
+                   help="continue the run checkpointed in RUN_DIR (its settings come from the checkpoint; the bus flags apply)")
     c.set_defaults(func=cmd_coordinator)
 
     a = sub.add_parser("agents", help="start agent processes (one per taxi) that join a run over zenoh")
@@ -369,4 +415,5 @@ def add_parsers(sub) -> None:  # noqa: ANN001
     a.add_argument("--ids", required=True, help="taxi indices to run here, e.g. 0-49 or 0-3,8")
     a.add_argument("--join-timeout", type=float, default=120.0, help="seconds to wait for the coordinator")
     a.add_argument("--data", default=None, help="this host's copy of the data directory, if not at the coordinator's path")
+    _grace_arg(a)
     a.set_defaults(func=cmd_agents)

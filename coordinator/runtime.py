@@ -13,6 +13,12 @@ agent rejoins from a snapshot.  With every agent answering, the decisions are
 those of the in-process policy of the same seed, bit for bit
 (``tests/test_runtime.py``).
 
+It survives faults (``tests/test_faults.py``): it holds a liveliness token
+that agents watch, publishes :class:`~bus.wire.Stop` with the reason on
+every way out, checkpoints each minute to its run directory
+(:mod:`coordinator.checkpoint`, ``--resume``), and tells a partition from
+single failures and a hung agent from a live one (:mod:`coordinator.faults`).
+
 A proposed control counts only if it is on its own agent's key, for the
 current minute, and one of that agent's candidate controls; anything else is
 dropped (the first of each kind logged) and the coordinator keeps waiting
@@ -26,6 +32,7 @@ import datetime as dt
 import sys
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -33,14 +40,16 @@ import numpy as np
 from agents.base import EpisodeContext, make_policy, policy_class
 from agents.rollout import RolloutConfig, RolloutPolicy, base_controls, candidate_controls
 from agents.waves import Waves, plan_waves
-from bus.checks import Bounds, Rejections, check_choice, check_control, check_forecast
+from bus.checks import Bounds, Rejections, check_ack, check_choice, check_control, check_forecast
 from bus.delta import state_message
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
-from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
+from bus.wire import Ack, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
 from city.errors import ConfigError
 from city.sim import FleetSim, Observation, Requests, decisions_hash
-from coordinator.metrics import Counted, Traffic
+from coordinator import checkpoint
+from coordinator.faults import ACK_WAIT_S, RESEND_S, SETTLE_S, Health, PartitionError, agents_text
+from coordinator.metrics import Counted
 
 
 @dataclass(frozen=True)
@@ -64,6 +73,10 @@ class FleetConfig:
     minute_s: float = 0.0
     #: Ask a ``surge predictor serve`` process on the bus for each hour's forecast instead of computing it here.
     predictor: bool = False
+    #: Seconds the clock waits for the agents of a partition to come back before the run ends.
+    partition_timeout_s: float = 120.0
+    #: Seconds the launcher's agents wait for a vanished coordinator (to be resumed) before they leave.
+    grace_s: float = 30.0
 
     def instance(self) -> tuple[Any, Requests, np.ndarray, EpisodeContext]:
         """The scenario, requests, start positions and episode context of this run: one place for both runs that must agree."""
@@ -107,7 +120,7 @@ def log(message: str) -> None:
 class Coordinator:
     """Runs one episode over the bus; :meth:`run` returns its metrics and decisions."""
 
-    def __init__(self, config: FleetConfig, progress: bool = True) -> None:
+    def __init__(self, config: FleetConfig, progress: bool = True, run_dir: str | Path | None = None, resume: bool = False) -> None:
         self.cfg = config
         self.keys = Keys(config.run)
         self.progress = progress
@@ -125,14 +138,28 @@ class Coordinator:
         self.spec = RunSpec(run=config.run, scenario=config.scenario, data_dir=config.data_dir, city=self.city.summary(), taxis=config.taxis,
                             minutes=config.minutes, policy=config.policy, rollout=asdict(self.rollout),
                             deadline_s=config.deadline_s)
-        self.alive: set[int] = set()
+        self.health = Health(config.taxis, log)
         self.forecast_msg = b""
-        self.stale = 0
+        #: Where the run's checkpoint is written each minute (``None``: nowhere).
+        self.run_dir = None if run_dir is None else Path(run_dir)
+        self.tally = checkpoint.Tally.fresh(config.minutes, config.taxis)
+        if resume:
+            if self.run_dir is None:
+                raise ConfigError("resuming a run needs its run directory")
+            self.tally = checkpoint.restore(self.run_dir, self.sim, config.minutes)
+            if self.sim.state.t >= config.minutes:
+                raise ConfigError(f"{self.run_dir / checkpoint.CHECKPOINT}: run {config.run!r} finished "
+                                  f"(minute {config.minutes} of {config.minutes}); nothing to resume")
+            log(f"resuming run {config.run!r} at minute {self.sim.state.t} from {self.run_dir / checkpoint.CHECKPOINT}")
+        #: Whether every agent has joined once: later token changes are departures and returns.
+        self.running = False
         self.bounds = Bounds(taxis=config.taxis, nodes=self.city.n_nodes, sectors=self.city.n_sectors, minutes=config.minutes)
         self.rejected = Rejections(log)
         #: The minute being played, against which proposed controls are checked.
         self.obs: Observation | None = None
-        self.traffic = Traffic()
+        #: The agents of the wave being released whose controls are still awaited, and those that came.
+        self.waiting: set[int] = set()
+        self.arrived: dict[int, Control] = {}
 
     # ------------------------------------------------------------------ inbox
     def _handle(self, item: tuple[str, str, object], want: set[tuple[int, int]] | None = None) -> Control | None:
@@ -148,85 +175,113 @@ class Coordinator:
             return None
 
     def _handle_one(self, tag: str, key: str, payload: object, want: set[tuple[int, int]] | None) -> Control | None:
+        current = None if self.obs is None else int(self.obs.t)
         if tag == "alive":
             agent = Keys.agent_of(key)
             if agent is None or not 0 <= agent < self.cfg.taxis:
                 raise WireError(f"{key}: a liveliness token of no agent of this run's {self.cfg.taxis}")
-            if payload:
-                self.alive.add(agent)
-            else:
-                self.alive.discard(agent)
-                log(f"agent {agent} left")
+            self.health.token(agent, bool(payload), self.running)
+        elif tag == "ack":
+            self.tally.traffic.received(payload)  # type: ignore[arg-type]
+            msg = check_ack(decode(payload, Ack, key), key, self.bounds)  # type: ignore[arg-type]
+            self.health.ack(msg.agent, msg.t, current)
         elif tag in ("spec", "snapshot"):
             try:
-                answer = self.spec if tag == "spec" else Snapshot(state=self.full_state(), forecast=self.forecast_msg)
+                answer = self.spec if tag == "spec" else self._snapshot()
                 payload.reply(key, answer.encode())  # type: ignore[attr-defined]
             finally:
                 payload.drop()  # type: ignore[attr-defined]  # ends the asker's get() now, not when the query is collected
         elif tag == "control":
-            self.traffic.received(payload)  # type: ignore[arg-type]
+            self.tally.traffic.received(payload)  # type: ignore[arg-type]
             c = check_control(decode(payload, Control, key), key, self.bounds)  # type: ignore[arg-type]
             if c.by != "agent":
                 raise WireError(f"{key}: a proposed control must say by='agent', not {c.by!r}")
             if self.obs is not None and c.t == self.obs.t:
                 check_choice(c, key, candidate_controls(self.city, self.obs, c.agent))
+                self.health.ack(c.agent, c.t, current)
             if want is not None and (c.t, c.agent) in want:
                 return c
-            self.stale += 1
+            self.tally.stale += 1
         return None
 
     def full_state(self) -> bytes:
         obs = self.sim.observe()
         return state_message(obs, None, base_controls(self.city, self.rollout, obs)).encode()
 
+    def _snapshot(self) -> Snapshot:
+        """The full state (with its base controls) and the hour's forecast: all a (re)joining agent needs (a turn brings its commitments)."""
+        return Snapshot(state=self.full_state(), forecast=self.forecast_msg)
+
     # ------------------------------------------------------------------- run
     def run(self, bus: SessionArgs) -> dict:
+        """Play the episode; ``Stop`` goes out on every way out (done, an error, SIGTERM, Ctrl-C), with the reason."""
         with open_session(bus) as session:
             inbox = Inbox()
+            pub_stop = publisher(session, self.keys.stop)
             decls = [
                 inbox.serve(session, self.keys.spec, "spec"),
                 inbox.serve(session, self.keys.snapshot, "snapshot"),
                 inbox.subscribe(session, self.keys.all_controls, "control"),
+                inbox.subscribe(session, self.keys.all_acks, "ack"),
                 inbox.watch_liveliness(session, self.keys.all_alive, "alive"),
             ]
+            token = session.liveliness().declare_token(self.keys.coordinator)  # once the snapshot it stands for is served
+            reason = "the coordinator failed"
             try:
-                return self._run(session, inbox)
+                result = self._run(session, inbox)
+                reason = "done"
+                return result
+            except SystemExit as exc:
+                reason = f"the coordinator was stopped (exit {exc.code})"
+                raise
+            except KeyboardInterrupt:
+                reason = "the coordinator was interrupted"
+                raise
+            except Exception as exc:
+                reason = f"the coordinator failed: {exc}"[:300]
+                raise
             finally:
+                pub_stop.put(Stop(t=self.cfg.minutes if reason == "done" else int(self.sim.state.t), reason=reason).encode())
+                if reason != "done":
+                    log(f"published stop at minute {self.sim.state.t}: {reason}")
                 for d in decls:
                     d.undeclare()
+                token.undeclare()
 
     def _wait_for_agents(self, inbox: Inbox) -> None:
         deadline = time.monotonic() + self.cfg.join_timeout_s
-        while len(self.alive) < self.cfg.taxis:
+        alive = self.health.alive
+        while len(alive) < self.cfg.taxis:
             left = deadline - time.monotonic()
             if left <= 0:
-                missing = sorted(set(range(self.cfg.taxis)) - self.alive)
-                raise ConfigError(f"run {self.cfg.run!r}: {len(self.alive)} of {self.cfg.taxis} agents joined within "
+                missing = sorted(set(range(self.cfg.taxis)) - alive)
+                raise ConfigError(f"run {self.cfg.run!r}: {len(alive)} of {self.cfg.taxis} agents joined within "
                                   f"{self.cfg.join_timeout_s:.0f} s; missing {', '.join(map(str, missing[:10]))}")
             item = inbox.get(timeout=min(left, 1.0))
             if item is not None:
                 self._handle(item)
+        self.running = True
         log(f"all {self.cfg.taxis} agents joined run {self.cfg.run!r}")
 
     def _run(self, session, inbox: Inbox) -> dict:  # noqa: ANN001
         cfg, keys = self.cfg, self.keys
-        pub_state, pub_forecast, pub_stop = (Counted(publisher(session, k), self.traffic) for k in (keys.state, keys.forecast, keys.stop))
-        turn_pub = {a: Counted(publisher(session, keys.turn(a)), self.traffic) for a in range(cfg.taxis)}
-        commit_pub = {a: Counted(publisher(session, keys.committed(a)), self.traffic) for a in range(cfg.taxis)}
+        pub_state, pub_forecast = (Counted(publisher(session, k), self.tally.traffic) for k in (keys.state, keys.forecast))
+        turn_pub = {a: Counted(publisher(session, keys.turn(a)), self.tally.traffic) for a in range(cfg.taxis)}
+        commit_pub = {a: Counted(publisher(session, keys.committed(a)), self.tally.traffic) for a in range(cfg.taxis)}
         self._wait_for_agents(inbox)
         joined_at = time.time()
-        controls = np.zeros((cfg.minutes, cfg.taxis), dtype=np.int32)
-        costs, step_s, plan_s = [], [], []
-        planned = np.zeros(cfg.taxis, dtype=np.int64)
-        fallbacks = np.zeros(cfg.taxis, dtype=np.int64)
-        rss = np.zeros(cfg.taxis)
-        minute_waves: list[list[dict]] = []
+        tally = self.tally
+        controls, costs, step_s, plan_s = tally.controls, tally.costs, tally.step_s, tally.plan_s
+        planned, fallbacks, rss = tally.planned, tally.fallbacks, tally.rss
         previous = None
+        first = int(self.sim.state.t)
         t_start = time.perf_counter()
-        for t in range(cfg.minutes):
+        for t in range(first, cfg.minutes):
             t0 = time.perf_counter()
+            if self.health.partitioned():
+                self._partition(inbox, t)  # the clock does not run while most of the fleet is cut off
             obs = self.obs = self.sim.observe()
-            if t % 60 == 0:
+            if t % 60 == 0 or t == first:
                 self.forecast_msg = self._forecast(session, inbox, t // 60)
                 pub_forecast.put(self.forecast_msg)
             base = base_controls(self.city, self.rollout, obs)
@@ -234,7 +289,7 @@ class Coordinator:
             previous = np.asarray(obs.req_index)
             u = base.copy()
             waves = plan_waves(self.city, obs, self.rollout.prune)
-            minute_waves.append([])
+            tally.waves.append([])
             for group in waves.groups():
                 wave_t0 = time.perf_counter()
                 got = self._turns(inbox, turn_pub, t, group.tolist(), waves, u)
@@ -242,6 +297,7 @@ class Coordinator:
                     c = got.get(agent)
                     if c is None:
                         fallbacks[agent] += 1
+                        tally.fallen.append([t, agent])
                         commit = Control(t=t, agent=agent, control=int(base[agent]), by="base")
                     else:
                         u[agent] = c.control
@@ -250,17 +306,18 @@ class Coordinator:
                         rss[agent] = max(rss[agent], c.rss_mb)
                         commit = c
                     commit_pub[agent].put(commit.encode())
-                minute_waves[-1].append({"seconds": time.perf_counter() - wave_t0, "agents": group.tolist(),
-                                         "plan_s": [got[a].plan_s if a in got else None for a in group.tolist()]})
+                tally.waves[-1].append({"seconds": time.perf_counter() - wave_t0, "agents": group.tolist(),
+                                        "plan_s": [got[a].plan_s if a in got else None for a in group.tolist()]})
             controls[t] = u
             costs.append(self.sim.step(u))
             step_s.append(time.perf_counter() - t0)
+            if self.run_dir is not None:
+                checkpoint.save(self.run_dir, asdict(cfg), self.sim, tally)
             if self.progress:
                 free = int((obs.tau == 0).sum())
                 log(f"minute {t + 1}/{cfg.minutes}: {free} free {'taxi' if free == 1 else 'taxis'} took turns, "
                     f"{costs[-1]} requests waiting ({step_s[-1]:.2f} s)")
             self._pace(inbox, t0 + cfg.minute_s)
-        pub_stop.put(Stop(t=cfg.minutes).encode())
         res = self.sim.result(costs, controls, step_s)
         return {
             "run": cfg.run,
@@ -275,8 +332,9 @@ class Coordinator:
             "fallbacks": int(fallbacks.sum()),
             "planned_per_agent": planned.tolist(),
             "fallbacks_per_agent": fallbacks.tolist(),
+            "fallback_turns": tally.fallen,
             "controls": controls.tolist(),
-            "stale_messages": self.stale,
+            "stale_messages": tally.stale,
             "rejected_messages": dict(self.rejected.counts),
             "step_seconds": {"median": float(np.median(step_s)), "max": float(np.max(step_s))},
             "minute_seconds": step_s,
@@ -284,11 +342,12 @@ class Coordinator:
                                    "max": float(np.max(plan_s)) if plan_s else None},
             "agent_peak_rss_mb": float(rss.max()),
             "wall_seconds": time.perf_counter() - t_start,
-            "critical_path": [len(w) for w in minute_waves],
-            "free_per_minute": [sum(len(wave["agents"]) for wave in w) for w in minute_waves],
-            "waves": minute_waves,
+            "critical_path": [len(w) for w in tally.waves],
+            "free_per_minute": [sum(len(wave["agents"]) for wave in w) for w in tally.waves],
+            "waves": tally.waves,
             "joined_at": joined_at,
-            "traffic": self.traffic.summary(cfg.minutes),
+            "traffic": tally.traffic.summary(cfg.minutes),
+            "resumed_at_minute": first if first else None,
         }
 
     def _forecast(self, session, inbox: Inbox, hour: int) -> bytes:  # noqa: ANN001
@@ -322,59 +381,114 @@ class Coordinator:
                           f"{self.cfg.join_timeout_s:.0f} s (last: {last})")
 
     def _pace(self, inbox: Inbox, until: float) -> None:
-        """Wait out the rest of the minute, still serving joins and snapshots."""
+        """Wait until ``until`` (``perf_counter`` seconds), still serving joins and snapshots and taking the wave's controls."""
         while (left := until - time.perf_counter()) > 0:
-            item = inbox.get(timeout=left)
-            if item is not None:
-                self._handle(item)
+            self._receive(inbox, left)
+
+    def _receive(self, inbox: Inbox, timeout: float) -> None:
+        """Handle the next item, if one comes within ``timeout`` s; a control of an agent in ``waiting`` goes to ``arrived``.
+
+        Every wait takes the wave's controls, so one that comes while the
+        clock is paused for a partition is not lost.
+        """
+        item = inbox.get(timeout=timeout)
+        if item is None:
+            return
+        t = -1 if self.obs is None else int(self.obs.t)
+        c = self._handle(item, {(t, a) for a in self.waiting})
+        if c is not None:
+            self.waiting.discard(c.agent)
+            self.arrived[c.agent] = c
 
     def _turns(self, inbox: Inbox, pubs: dict, t: int, group: list[int], waves: Waves, u: np.ndarray) -> dict[int, Control]:
         """Give one wave's agents their turns at once and wait for their controls until the deadline or their departure.
 
         Each turn carries the committed controls ``u`` of the agent's
-        dependencies, all in earlier waves.  The controls that came, by agent;
-        the missing ones get the base control.
+        dependencies, all in earlier waves.  Suspect agents' turns are sent
+        but not waited for.  A departure that turns out to be a partition
+        pauses the clock, and the wave's unanswered turns go out again once
+        the agents are back; they also go out again every
+        :data:`~coordinator.faults.RESEND_S` seconds, and an agent answers a
+        turn it has planned with the control it sent.  The controls that
+        came, by agent; the missing ones get the base control.
         """
+        health = self.health
         depends = dict(zip(waves.agents.tolist(), waves.depends))
-        waiting = {a for a in group if a in self.alive}
-        for a in sorted(waiting):
-            deps = depends[a]
-            pubs[a].put(Turn(t=t, agent=a, deps=deps, controls=u[deps]).encode())
-        got: dict[int, Control] = {}
-        deadline = time.monotonic() + self.cfg.deadline_s
-        while waiting:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                log(f"minute {t}: {_agents(waiting)} silent for {self.cfg.deadline_s:g} s; base control used")
+        turns = {a: Turn(t=t, agent=a, deps=depends[a], controls=u[depends[a]]).encode() for a in group}
+        if health.partitioned() or not set(group) <= health.alive:
+            self._partition(inbox, t)  # a wave is not released into a partition
+        self.arrived = {}
+        self.waiting = {a for a in group if a in health.alive}
+        for a in sorted(self.waiting):
+            pubs[a].put(turns[a])
+        self.waiting -= health.suspect
+        sent = time.monotonic()
+        deadline = sent + self.cfg.deadline_s
+        while self.waiting:
+            if not self.waiting <= health.alive:
+                healed = self._partition(inbox, t)
+                gone = self.waiting - health.alive
+                if gone:
+                    log(f"minute {t}: {agents_text(gone)} gone; base control used")
+                    self.waiting -= gone
+                if healed:
+                    for a in sorted(self.waiting):
+                        pubs[a].put(turns[a])
+                    sent = time.monotonic()
+                    deadline = sent + self.cfg.deadline_s
+                continue
+            now = time.monotonic()
+            if now >= deadline:
+                health.missed(self.waiting, t, self.cfg.deadline_s)
+                self.waiting = set()  # a late control is stale, not this wave's
                 break
-            item = inbox.get(timeout=left)
-            if item is not None:
-                c = self._handle(item, want={(t, a) for a in waiting})
-                if c is not None:
-                    got[c.agent] = c
-                    waiting.discard(c.agent)
-            gone = {a for a in waiting if a not in self.alive}
-            if gone:
-                log(f"minute {t}: {_agents(gone)} gone; base control used")
-                waiting -= gone
-        return got
+            if now - sent >= RESEND_S:
+                for a in sorted(self.waiting):
+                    pubs[a].put(turns[a])
+                sent = now
+            self._receive(inbox, min(deadline - now, sent + RESEND_S - now))
+        return self.arrived
+
+    def _partition(self, inbox: Inbox, t: int) -> bool:
+        """Whether the fleet is partitioned, after letting a burst of departures arrive; if so, wait until it heals.
+
+        ``False``: the departures are those of single agents, and the run goes
+        on without them.  ``True``: the agents of the partition (alive, or gone
+        in its burst) are back and hold minute ``t``, or the ack wait ran out.
+        """
+        health = self.health
+        while (left := health.last_departure + SETTLE_S - time.monotonic()) > 0:
+            self._pace(inbox, time.perf_counter() + left)
+        expected = health.partition()
+        if not health.partitioned() or expected <= health.alive:
+            return False  # single departures, or a fleet worn down one agent at a time: nobody to wait for
+        for a in expected:
+            health.acked.pop(a, None)  # the acks that count are those of the agents' snapshots after the partition
+        timeout = self.cfg.partition_timeout_s
+        log(f"minute {t}: partition: {self.cfg.taxis - len(health.alive)} of {self.cfg.taxis} agents' tokens are gone; "
+            f"the clock pauses until they return (at most {timeout:g} s)")
+        start = time.monotonic()
+        acked_by = None
+        while True:
+            back, acked = health.healed(expected, t)
+            now = time.monotonic()
+            if back and acked_by is None:
+                acked_by = now + ACK_WAIT_S
+            if acked or (acked_by is not None and now >= acked_by):
+                log(f"minute {t}: partition healed after {now - start:.1f} s: {len(health.alive)} agents back; minute {t} goes on")
+                return True
+            if now - start >= timeout:
+                raise PartitionError(f"run {self.cfg.run!r}: partition at minute {t}: {len(expected & health.alive)} of "
+                                     f"{len(expected)} agents returned within {timeout:g} s; the run ends")
+            self._pace(inbox, time.perf_counter() + 0.2)
 
 
-def _agents(ids: set[int]) -> str:
-    """``agent 3``, ``agents 3, 5`` or ``agents 0, 1, … and 90 more``: a log line stays one short line."""
-    ids_ = sorted(ids)
-    if len(ids_) == 1:
-        return f"agent {ids_[0]}"
-    more = f" and {len(ids_) - 10} more" if len(ids_) > 10 else ""
-    return f"agents {', '.join(map(str, ids_[:10]))}{more}"
-
-
-def coordinator_main(config: FleetConfig, bus: SessionArgs, result_path: str | None = None) -> dict:
-    """Run the coordinator; with ``result_path``, write the result there as JSON (for a launcher)."""
+def coordinator_main(config: FleetConfig, bus: SessionArgs, result_path: str | None = None, run_dir: str | None = None,
+                     resume: bool = False) -> dict:
+    """Run the coordinator (checkpointing to ``run_dir``, resuming from it); with ``result_path``, write the result there as JSON."""
     import json
-    from pathlib import Path
 
-    result = Coordinator(config).run(bus)
+    result = Coordinator(config, run_dir=run_dir, resume=resume).run(bus)
     if result_path is not None:
         Path(result_path).write_text(json.dumps(result, indent=1))
     return result

@@ -14,7 +14,7 @@ from agents.greedy import greedy_controls
 from bus.delta import StateView, state_message
 from bus.keys import Keys
 from bus.session import DEFAULT_ENDPOINT, DEFAULT_TLS_ENDPOINT, INSECURE_WARNING, SessionArgs, add_session_args, session_args
-from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
+from bus.wire import Ack, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
 from city.errors import ConfigError
 from city.sim import FleetSim
 from coordinator.evaluate import episode_requests, initial_positions
@@ -37,6 +37,7 @@ def test_every_message_round_trips_exactly() -> None:
     assert (turn.t, turn.agent, turn.deps.tolist(), turn.controls.tolist()) == (3, 2, [0, 1], [-1, 7])
     snap = Snapshot(state=b"abc", forecast=fc.encode())
     assert decode(snap.encode(), (Turn, Snapshot)) == snap
+    assert decode(Ack(t=4, agent=1).encode(), Ack) == Ack(t=4, agent=1)
 
 
 @pytest.mark.parametrize(

@@ -37,6 +37,8 @@ def run_cli(*args: str) -> subprocess.CompletedProcess:
         (["evaluate", "--resume"], "--resume needs --json"),
         (["fleet", "--policy", "greedy"], "the distributed runtime runs rollout policies"),
         (["fleet", "--deadline", "0"], "--deadline and --join-timeout must be positive"),
+        (["fleet", "--grace", "0"], "--partition-timeout and --grace must be positive"),
+        (["coordinator", "--resume", "/nonexistent"], "/nonexistent/checkpoint.json: no such file: nothing to resume"),
         (["coordinator", "--connect", "7447"], "zenoh endpoint '7447': expected PROTOCOL/ADDRESS"),
         (["coordinator", "--run", "a/b"], "run name 'a/b'"),
         (["agents", "--ids", "0-x"], "--ids '0-x': '0-x' is not N or N-M"),

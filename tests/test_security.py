@@ -291,7 +291,7 @@ def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> 
                     b"junk"):
         assert coord._handle(("control", k.control(1), payload), want) is None
     assert coord._handle(("control", k.control(2), Control(t=0, agent=1, control=ok).encode()), want) is None
-    assert coord._handle(("alive", k.alive(7), True), want) is None and coord.alive == set()
+    assert coord._handle(("alive", k.alive(7), True), want) is None and coord.health.alive == set()
 
     class Gone:
         def reply(self, *_):  # noqa: ANN002
