@@ -308,7 +308,7 @@ class Coordinator:
         deadline = time.monotonic() + self.cfg.join_timeout_s
         last = "no answer"
         while time.monotonic() < deadline:
-            for reply in session.get(self.keys.predictor, payload=request, timeout=10.0):
+            for reply in session.get(self.keys.predictor, payload=request, encoding=ENCODING, timeout=10.0):
                 if reply.ok is None:
                     why = reply.err.payload.to_bytes().decode(errors="replace")
                     if why != "Timeout":
