@@ -64,7 +64,7 @@ class AgentForecasts:
         self._inbox: Inbox | None = None
         self._keys: Keys | None = None
         self._subs: dict[int, Any] = {}
-        #: Pieces fetched from the coordinator (rather than received on a subscription), for the run's report.
+        #: Pieces that came by query from the coordinator rather than on a subscription.
         self.fetched = 0
 
     # ------------------------------------------------------------- receiving

@@ -155,3 +155,49 @@ def test_an_outside_client_follows_a_run_and_rebuilds_every_taxis_position(tmp_p
         assert {int(a): c for a, c in seen["committed"].get(str(t), {}).items()} == {a: controls[a] for a in free}
         sim.step(np.asarray(controls, dtype=np.int32))
     assert seen["moves_checked"] > 0
+
+
+def test_a_taxi_follows_its_sectors_and_fetches_what_it_missed_when_it_moves() -> None:
+    """A real zenoh session: the taxi's subscriptions follow its sectors; a stand-in coordinator answers the sector queries."""
+    import threading
+    import time
+
+    import zenoh
+
+    from bus.session import Inbox, SessionArgs, open_session
+
+    city = load_city("synthetic")
+    fc = forecast(city, np.random.default_rng(3))
+    keys = Keys("follow")
+    asked: list[str] = []
+    with open_session(SessionArgs(mode="peer")) as session:
+        answers = session.declare_queryable(keys.all_forecasts, zenoh.handlers.FifoChannel(64))
+
+        done = threading.Event()
+
+        def coordinator() -> None:
+            while not done.is_set():
+                if (query := answers.try_recv()) is None:
+                    time.sleep(0.01)
+                    continue
+                asked.append(str(query.key_expr))
+                query.reply(query.key_expr, sector_message(fc, city, 0, Keys.agent_of(str(query.key_expr))).encode())
+                query.drop()
+
+        answering = threading.Thread(target=coordinator)
+        answering.start()
+        inbox = Inbox()
+        store = _pieces(city, fc, RolloutConfig(), [])
+        store.attach(session, inbox, keys)
+        store.follow(np.array([1, 2]), hour=0)
+        assert sorted(store.slices[0]) == [1, 2] and store.fetched == 2
+        store.follow(np.array([2, 3]), hour=0)  # moved: 1 is dropped, 3 fetched, 2 kept
+        assert sorted(store.slices[0]) == [1, 2, 3] and store.fetched == 3 and asked == [keys.forecast(s) for s in (1, 2, 3)]
+        for s in range(5):  # the next hour's publication reaches only the followed sectors
+            session.put(keys.forecast(s), sector_message(fc, city, 1, s).encode())
+        got = sorted(Keys.agent_of(item[1]) for item in iter(lambda: inbox.get(timeout=1.0), None))
+        assert got == [2, 3]
+        store.close()
+        done.set()
+        answering.join(5)
+        answers.undeclare()
