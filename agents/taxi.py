@@ -68,6 +68,8 @@ class TaxiAgent:
         self.forecasts: AgentForecasts
         self.committed: dict[int, dict[int, int]] = {}
         self.pending: Turn | None = None
+        #: The minute whose turn made this taxi ask the coordinator for missing forecast pieces (once a turn).
+        self.asked: int | None = None
         self.early: list[tuple[Control, str]] = []
         self.context: StepContext | None = None
         self.decisions = 0
@@ -254,7 +256,8 @@ class TaxiAgent:
         if self.context is None or self.context.obs.t != obs.t:
             hour, sectors = int(obs.t) // 60, needed_sectors(self.city, self.rollout, int(obs.pos[self.me]))
             tables = self.forecasts.tables(hour, sectors)
-            if tables is None and self.pending is not None and self.pending.t == obs.t:
+            if tables is None and self.pending is not None and self.pending.t == obs.t and self.asked != obs.t:
+                self.asked = int(obs.t)
                 self.forecasts.fetch(hour, sectors)  # its turn, and a piece it follows never came: ask for it
                 tables = self.forecasts.tables(hour, sectors)
             if tables is None:

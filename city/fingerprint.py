@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from importlib import metadata
@@ -30,11 +31,13 @@ def city_sha256(city: City) -> str:
     return h.hexdigest()
 
 
+@functools.cache
 def code_version() -> str:
     """``surge <version>+<hash>``: the package version and a hash of the sources that make decisions (city/, agents/).
 
     Hosts with the same string plan identically on the same city; the hash
     catches a checkout that differs from the coordinator's without a new version.
+    Computed once a process: the sources do not change under it.
     """
     try:
         version = metadata.version("surge")

@@ -2,8 +2,8 @@
 
 Each minute it publishes the state (a delta) and, at each hour, the forecast
 sector by sector (unless a predictor service does; it answers a taxi's query
-for a sector it missed either way); then it gives the free taxis their turns one at a time, in agent order, and
-commits each control it receives so that the agents after it can see it.  A
+for a sector it missed either way); then it gives the free taxis their turns
+one at a time, in agent order, and commits each control it receives so that the agents after it can see it.  A
 silent agent (its liveliness token gone, or past the deadline) gets the base
 policy's control for that minute, which is what the in-process rollout
 assumes for the agents after the decider, and the run goes on.  A restarted
