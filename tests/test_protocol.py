@@ -201,3 +201,73 @@ def test_a_taxi_follows_its_sectors_and_fetches_what_it_missed_when_it_moves() -
         done.set()
         answering.join(5)
         answers.undeclare()
+
+
+def test_imports_run_one_way() -> None:
+    """coordinator -> predictor / agents -> bus -> city; agents reach the predictor only in the model provider, lazily."""
+    import ast
+
+    root = Path(__file__).resolve().parents[1]
+    allowed = {"city": {"city"}, "bus": {"bus", "city"}, "agents": {"agents", "bus", "city"}, "predictor": {"predictor", "bus", "city"}}
+    wrong, lazy = [], []
+    for pkg, may in allowed.items():
+        for path in sorted((root / pkg).rglob("*.py")):
+            tree = ast.parse(path.read_text())
+            top_level = {id(n) for n in tree.body}
+            for node in ast.walk(tree):
+                names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                         [node.module] if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module else [])
+                for name in names:
+                    top = name.split(".")[0]
+                    if top in ("city", "bus", "agents", "predictor", "coordinator") and top not in may:
+                        where = f"{path.relative_to(root)} imports {name}"
+                        if id(node) in top_level:
+                            wrong.append(f"{where} (line {node.lineno})")
+                        else:
+                            lazy.append(where)
+    assert wrong == []
+    assert lazy == ["agents/forecast.py imports predictor.forecast"]
+
+
+def test_an_agent_on_another_city_refuses_to_join_at_once(capsys: pytest.CaptureFixture) -> None:
+    """A real session answers ``spec`` with another city's hash: the agent exits with one line, not after its join timeout."""
+    import threading
+    import time
+
+    import zenoh
+
+    from agents.taxi import AgentConfig, agent_main
+    from bus.router import free_tcp_port
+    from bus.session import SessionArgs, open_session
+    from bus.wire import RunSpec
+
+    city = load_city("synthetic")
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    keys = Keys("refuse")
+    spec = RunSpec(run="refuse", scenario="synthetic", data_dir=None, city=city.summary(), taxis=1, minutes=2, policy="surge",
+                   rollout={"samples": 4}, deadline_s=5.0, city_sha256="f" * 64, code="surge 0.0.0+000000000000")
+    with open_session(SessionArgs(mode="peer", listen=[endpoint])) as session:
+        answers = session.declare_queryable(keys.spec, zenoh.handlers.FifoChannel(16))
+        done = threading.Event()
+
+        def coordinator() -> None:
+            while not done.is_set():
+                if (query := answers.try_recv()) is None:
+                    time.sleep(0.01)
+                    continue
+                query.reply(keys.spec, spec.encode())
+                query.drop()
+
+        answering = threading.Thread(target=coordinator)
+        answering.start()
+        t0 = time.monotonic()
+        try:
+            code = agent_main(AgentConfig(index=0, run="refuse", bus=SessionArgs(mode="peer", connect=[endpoint]), join_timeout_s=120))
+        finally:
+            done.set()
+            answering.join(5)
+            answers.undeclare()
+    assert code == 2 and time.monotonic() - t0 < 60
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"surge agent 0: error: agent 0 does not join run 'refuse': this host's synthetic city has content hash "
+                              f"{city_sha256(city)[:16]}…, the coordinator's ffffffffffffffff…")
