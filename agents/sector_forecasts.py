@@ -147,7 +147,7 @@ class AgentForecasts:
                 try:
                     self.on_sector(reply.ok.payload.to_bytes(), key)
                     self.fetched += 1
-                except Exception as exc:  # a bad answer: leave it out; the turn asks again
+                except Exception as exc:  # a bad answer: leave it out (the taxi asks once more at its turn)
                     self.rejected.exception("forecast", key, exc)
 
     def close(self) -> None:
