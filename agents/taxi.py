@@ -203,7 +203,7 @@ class TaxiAgent:
             self.context = None
             self._follow()
             early, self.early = self.early, []
-            for c, k in early:  # commitments that came ahead of their minute's state
+            for c, k in early:  # commitments that came ahead of their minute's state (those still ahead go back)
                 try:
                     self._on_committed(c, k)
                 except Exception as exc:
@@ -223,11 +223,11 @@ class TaxiAgent:
         obs = self.view.obs
         if obs is None:
             raise WireError(f"{key}: a committed control before this agent has a state")
-        if c.t == obs.t + 1 and len(self.early) < self.bounds.taxis:
-            self.early.append((c, key))  # checked once the state of minute c.t is in
+        if obs.t < c.t < self.bounds.minutes and len(self.early) < self.bounds.taxis * self.bounds.minutes:
+            self.early.append((c, key))  # ahead of its minute's state (zenoh orders per key only): checked once that state is in
             return
-        if c.t == obs.t - 1:
-            return  # a later agent's commitment of the minute before, overtaken by this minute's state: no longer needed
+        if c.t < obs.t:
+            return  # a later agent's commitment of a minute before, overtaken by a newer state: no longer needed
         check_control(c, key, self.bounds, int(obs.t))
         if obs.tau[c.agent] > 0:
             raise WireError(f"{key}: agent {c.agent} is busy at minute {obs.t}; it commits no control")

@@ -271,3 +271,16 @@ def test_an_agent_on_another_city_refuses_to_join_at_once(capsys: pytest.Capture
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith(f"surge agent 0: error: agent 0 does not join run 'refuse': this host's synthetic city has content hash "
                               f"{city_sha256(city)[:16]}…, the coordinator's ffffffffffffffff…")
+
+
+@pytest.mark.usefixtures("compiled_kernels")
+def test_across_an_hour_the_per_sector_forecasts_give_the_in_process_decisions() -> None:
+    """62 minutes: the predictor service publishes hour 1's sectors mid-run, and taxis that moved meanwhile follow theirs."""
+    from coordinator.fleet import in_process, run_local_fleet
+    from coordinator.runtime import FleetConfig
+
+    cfg = FleetConfig(run="hours", taxis=2, minutes=62, options={"forecast": "true-rate", "samples": 20, "horizon": 3},
+                      deadline_s=120, join_timeout_s=300, predictor=True)
+    dist = run_local_fleet(cfg, secure=False)
+    assert dist["fallbacks"] == 0 and dist["agents_exit_codes"] == [0, 0]
+    assert dist["decisions_sha256"] == in_process(cfg)["decisions_sha256"]

@@ -246,8 +246,10 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
         ("committed", k.committed(0), Control(t=0, agent=0, control=2**40, by="agent").encode()),  # was an int32 overflow
         ("committed", k.committed(0), Control(t=0, agent=0, control=-5, by="agent").encode()),  # was a wrapped index
         ("committed", k.committed(2), Control(t=0, agent=0, control=ok, by="agent").encode()),  # another agent's key
-        ("committed", k.committed(0), Control(t=3, agent=0, control=ok, by="agent").encode()),  # not the current minute
-        ("turn", k.turn(1), Turn(t=2, agent=1).encode()),
+        ("committed", k.committed(0), Control(t=7, agent=0, control=ok, by="agent").encode()),  # not a minute of the episode
+        ("committed", k.committed(2), Control(t=2, agent=2, control=ok, by="agent").encode()),  # ahead of its state: held
+        ("turn", k.turn(1), Turn(t=7, agent=1).encode()),
+        ("turn", k.turn(1), Turn(t=3, agent=1).encode()),  # ahead of its state: held
         ("stop", k.stop, Stop(t=1).encode()),  # not the run's end: the agent stays
         ("forecast", k.forecast(0), b"\x93\x01\x02"),
         ("committed", k.committed(0), Control(t=0, agent=0, control=ok, by="agent").encode()),
@@ -258,13 +260,15 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
     err = capsys.readouterr().err
     for reason in ("field 'pos' has 2 taxis, the run has 3", f"field 'pos' holds {n}, outside 0..{n - 1}",
                    "control 1099511627776 of agent 0 is not one of its controls",
-                   "control of agent 0 on another agent's key", "field 't' is 3, the current minute is 0",
-                   "turn/1: field 't' is 2, the current minute is 0", "field 't' is 1, the run ends after minute 4", "forecast"):
+                   "control of agent 0 on another agent's key", "field 't' is 7, the current minute is 0",
+                   "turn/1: field 't' is 7, outside the episode's minutes 0..3", "field 't' is 1, the run ends after minute 4",
+                   "forecast"):
         assert reason in err, reason
     assert "control -5" not in err  # the same kind as 2**40's: counted, not logged again
     assert agent.rejected.counts["committed: surge/u/committed/N: control N of agent N is not one of its controls …"] == 2
     assert agent.view.obs is not None and agent.view.obs.t == 0
-    assert agent.committed == {0: {0: ok}}  # only the good commitment
+    assert agent.committed == {0: {0: ok}}  # only the good commitment of this minute ...
+    assert [c.t for c, _ in agent.early] == [2] and agent.pending == Turn(t=3, agent=1)  # ... and those ahead of their states
 
 
 def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> None:
