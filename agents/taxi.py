@@ -1,8 +1,10 @@
 """One taxi as its own process on the bus: it follows the state, waits for its turn and plans its own control.
 
 The agent fetches the run's :class:`~bus.wire.RunSpec` from the coordinator,
-builds the static city once (from its on-disk cache), then reacts to what
-arrives: states and forecasts update its copy of the world, committed
+builds the static city once (from its on-disk cache) and refuses to join if
+its city's content hash is not the spec's; then it reacts to what arrives:
+states and the forecasts of the sectors it follows
+(:mod:`agents.sector_forecasts`) update its copy of the world, committed
 controls of the agents before it fill in its predecessors' moves, and a
 :class:`~bus.wire.Turn` makes it run :func:`agents.rollout.plan_agent`,
 exactly the function the in-process policy calls, and publish the result.
@@ -26,15 +28,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.forecast import Forecast
-from agents.rollout import DemandTables, RolloutConfig, StepContext, candidate_controls, plan_agent, prepare_step, warm_up
-from bus.checks import (Bounds, Rejections, check_choice, check_control, check_forecast, check_spec, check_state,
+from agents.rollout import RolloutConfig, StepContext, candidate_controls, plan_agent, prepare_step, warm_up
+from agents.sector_forecasts import AgentForecasts, needed_sectors
+from bus.checks import (Bounds, Rejections, check_choice, check_control, check_spec, check_state,
                         check_stop, check_turn)
 from bus.delta import StateView
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
 from bus.wire import Control, ForecastMsg, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
 from city.errors import ConfigError, SurgeError
+from city.fingerprint import city_sha256, code_version
 
 
 @dataclass(frozen=True)
@@ -61,9 +64,12 @@ class TaxiAgent:
         self.keys = Keys(config.run)
         self.me = config.index
         self.view = StateView()
-        self.tables: dict[int, DemandTables] = {}
+        #: Set by the accepted run spec, with the city.
+        self.forecasts: AgentForecasts
         self.committed: dict[int, dict[int, int]] = {}
         self.pending: Turn | None = None
+        #: The minute whose turn made this taxi ask the coordinator for missing forecast pieces (once a turn).
+        self.asked: int | None = None
         self.early: list[tuple[Control, str]] = []
         self.context: StepContext | None = None
         self.decisions = 0
@@ -76,13 +82,14 @@ class TaxiAgent:
             inbox = Inbox()
             subs = [
                 inbox.subscribe(session, self.keys.state, "state"),
-                inbox.subscribe(session, self.keys.forecast, "forecast"),
+                inbox.subscribe(session, self.keys.dropoffs, "dropoffs"),
                 inbox.subscribe(session, self.keys.turn(self.me), "turn"),
                 inbox.subscribe(session, self.keys.all_committed, "committed"),
                 inbox.subscribe(session, self.keys.stop, "stop"),
             ]
             spec = self._fetch_spec(session)
             self.bounds = Bounds(taxis=spec.taxis, nodes=self.city.n_nodes, sectors=self.city.n_sectors, minutes=spec.minutes)
+            self.forecasts.attach(session, inbox, self.keys)
             self._warm_up()
             out = publisher(session, self.keys.control(self.me))
             token = session.liveliness().declare_token(self.keys.alive(self.me))
@@ -91,6 +98,7 @@ class TaxiAgent:
                 self._loop(session, inbox, out)
             finally:
                 token.undeclare()
+                self.forecasts.close()
                 for s in subs:
                     s.undeclare()
         return self.decisions
@@ -109,6 +117,8 @@ class TaxiAgent:
                     continue
                 try:
                     return self._accept_spec(reply.ok.payload.to_bytes())
+                except OtherCity:
+                    raise
                 except Exception as exc:  # a spec this agent cannot run: drop it, ask again
                     why = str(exc)
                     self.rejected.exception("spec", self.keys.spec, exc)
@@ -137,7 +147,16 @@ class TaxiAgent:
             raise city
         if city.summary() != spec.city:
             raise WireError(f"{self.keys.spec}: this host's {spec.scenario} city {city.summary()} is not the coordinator's {spec.city}")
+        mine = city_sha256(city)
+        if mine != spec.city_sha256:
+            raise OtherCity(f"agent {self.me} does not join run {spec.run!r}: this host's {spec.scenario} city has content hash "
+                            f"{mine[:16]}…, the coordinator's {spec.city_sha256[:16]}… (same sizes, other streets, sectors "
+                            f"or pickup intersections; rebuild the city from the same data)")
+        if spec.code != code_version():
+            log(self.me, f"warning: this host runs {code_version()}, the coordinator {spec.code}; decisions may differ from its reference")
         self.city, self.rollout = city, rollout
+        bounds = Bounds(taxis=spec.taxis, nodes=city.n_nodes, sectors=city.n_sectors, minutes=spec.minutes)
+        self.forecasts = AgentForecasts(city, rollout, bounds, self.rejected)
         return spec
 
     def _snapshot(self, session) -> None:  # noqa: ANN001
@@ -158,9 +177,16 @@ class TaxiAgent:
             return
 
     def _on_forecast(self, msg: ForecastMsg) -> None:
-        check_forecast(msg, self.keys.forecast, self.bounds)
-        fc = Forecast(eta=msg.eta, rho=msg.rho, delta=msg.delta, beta=msg.beta)
-        self.tables[msg.hour] = DemandTables.build(self.city, fc, self.rollout.ce, self.rollout.seed)
+        self.forecasts.on_whole(msg, self.keys.snapshot)
+
+    def _follow(self) -> None:
+        """Follow the sectors this taxi plans in next: where it is, or where it is free again when busy."""
+        obs = self.view.obs
+        if obs is None:
+            return
+        node = int(obs.pos[self.me]) if obs.tau[self.me] == 0 or obs.dest[self.me] < 0 else int(obs.dest[self.me])
+        self.forecasts.forget_before(int(obs.t) // 60)
+        self.forecasts.follow(needed_sectors(self.city, self.rollout, node), int(obs.t) // 60)
 
     def _minute(self) -> int | None:
         return None if self.view.obs is None else int(self.view.obs.t)
@@ -175,15 +201,17 @@ class TaxiAgent:
             if not self.view.apply(msg):
                 self._snapshot(session)
             self.context = None
+            self._follow()
             early, self.early = self.early, []
-            for c, k in early:  # commitments that came ahead of their minute's state
+            for c, k in early:  # commitments that came ahead of their minute's state (those still ahead go back)
                 try:
                     self._on_committed(c, k)
                 except Exception as exc:
                     self.rejected.exception("committed", k, exc)
         elif tag == "forecast":
-            self._on_forecast(decode(payload, ForecastMsg, key))  # type: ignore[arg-type]
-            self.context = None
+            self.forecasts.on_sector(payload, key)
+        elif tag == "dropoffs":
+            self.forecasts.on_dropoffs(payload, key)
         elif tag == "committed":
             self._on_committed(decode(payload, Control, key), key)  # type: ignore[arg-type]
         elif tag == "turn":
@@ -195,11 +223,11 @@ class TaxiAgent:
         obs = self.view.obs
         if obs is None:
             raise WireError(f"{key}: a committed control before this agent has a state")
-        if c.t == obs.t + 1 and len(self.early) < self.bounds.taxis:
-            self.early.append((c, key))  # checked once the state of minute c.t is in
+        if obs.t < c.t < self.bounds.minutes and len(self.early) < self.bounds.taxis * self.bounds.minutes:
+            self.early.append((c, key))  # ahead of its minute's state (zenoh orders per key only): checked once that state is in
             return
-        if c.t == obs.t - 1:
-            return  # a later agent's commitment of the minute before, overtaken by this minute's state: no longer needed
+        if c.t < obs.t:
+            return  # a later agent's commitment of a minute before, overtaken by a newer state: no longer needed
         check_control(c, key, self.bounds, int(obs.t))
         if obs.tau[c.agent] > 0:
             raise WireError(f"{key}: agent {c.agent} is busy at minute {obs.t}; it commits no control")
@@ -223,10 +251,18 @@ class TaxiAgent:
     def _prepare(self) -> None:
         """Build the minute's shared context as soon as the state and forecast are in, while earlier agents plan."""
         obs = self.view.obs
-        if obs is None or obs.t // 60 not in self.tables or obs.tau[self.me] > 0:
+        if obs is None or obs.tau[self.me] > 0:
             return
         if self.context is None or self.context.obs.t != obs.t:
-            self.context = prepare_step(self.city, self.rollout, obs, self.tables[obs.t // 60], obs.t % 60)
+            hour, sectors = int(obs.t) // 60, needed_sectors(self.city, self.rollout, int(obs.pos[self.me]))
+            tables = self.forecasts.tables(hour, sectors)
+            if tables is None and self.pending is not None and self.pending.t == obs.t and self.asked != obs.t:
+                self.asked = int(obs.t)
+                self.forecasts.fetch(hour, sectors)  # its turn, and a piece it follows never came: ask for it
+                tables = self.forecasts.tables(hour, sectors)
+            if tables is None:
+                return
+            self.context = prepare_step(self.city, self.rollout, obs, tables, obs.t % 60)
 
     def _maybe_plan(self, out) -> None:  # noqa: ANN001
         turn, obs = self.pending, self.view.obs
@@ -248,6 +284,10 @@ class TaxiAgent:
         self.pending = None
         for t in [t for t in self.committed if t < turn.t]:
             del self.committed[t]
+
+
+class OtherCity(ConfigError):
+    """The coordinator's city is not this host's: the agent refuses to join rather than plan on another map."""
 
 
 def agent_main(config: AgentConfig) -> int:

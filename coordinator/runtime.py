@@ -1,8 +1,9 @@
 """The coordinator of a distributed run: the clock, the ground-truth world and the order of turns.
 
-Each minute it publishes the state (a delta) and, at each hour, the forecast;
-then it gives the free taxis their turns one at a time, in agent order, and
-commits each control it receives so that the agents after it can see it.  A
+Each minute it publishes the state (a delta) and, at each hour, the forecast
+sector by sector (unless a predictor service does; it answers a taxi's query
+for a sector it missed either way); then it gives the free taxis their turns
+one at a time, in agent order, and commits each control it receives so that the agents after it can see it.  A
 silent agent (its liveliness token gone, or past the deadline) gets the base
 policy's control for that minute, which is what the in-process rollout
 assumes for the agents after the decider, and the run goes on.  A restarted
@@ -31,10 +32,13 @@ from agents.base import EpisodeContext, make_policy, policy_class
 from agents.rollout import RolloutConfig, RolloutPolicy, base_controls, candidate_controls
 from bus.checks import Bounds, Rejections, check_choice, check_control, check_forecast
 from bus.delta import state_message
+from bus.forecasts import ForecastPublisher, sector_message
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
-from bus.wire import Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
+from bus.wire import ENCODING, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
 from city.errors import ConfigError
+from city.fingerprint import city_sha256, code_version
+from city.forecast import Forecast
 from city.sim import FleetSim, Observation, Requests, decisions_hash
 
 
@@ -119,9 +123,11 @@ class Coordinator:
         self.sim = FleetSim(self.city, requests, start)
         self.spec = RunSpec(run=config.run, scenario=config.scenario, data_dir=config.data_dir, city=self.city.summary(), taxis=config.taxis,
                             minutes=config.minutes, policy=config.policy, rollout=asdict(self.rollout),
-                            deadline_s=config.deadline_s)
+                            deadline_s=config.deadline_s, city_sha256=city_sha256(self.city), code=code_version())
         self.alive: set[int] = set()
         self.forecast_msg = b""
+        #: The current hour and its forecast, for the sector queries of taxis that missed a piece.
+        self.hour_forecast: tuple[int, Forecast] | None = None
         self.stale = 0
         self.bounds = Bounds(taxis=config.taxis, nodes=self.city.n_nodes, sectors=self.city.n_sectors, minutes=config.minutes)
         self.rejected = Rejections(log)
@@ -154,9 +160,14 @@ class Coordinator:
         elif tag in ("spec", "snapshot"):
             try:
                 answer = self.spec if tag == "spec" else Snapshot(state=self.full_state(), forecast=self.forecast_msg)
-                payload.reply(key, answer.encode())  # type: ignore[attr-defined]
+                payload.reply(key, answer.encode(), encoding=ENCODING)  # type: ignore[attr-defined]
             finally:
                 payload.drop()  # type: ignore[attr-defined]  # ends the asker's get() now, not when the query is collected
+        elif tag == "forecast":
+            try:
+                payload.reply(key, self._sector_answer(key), encoding=ENCODING)  # type: ignore[attr-defined]
+            finally:
+                payload.drop()  # type: ignore[attr-defined]
         elif tag == "control":
             c = check_control(decode(payload, Control, key), key, self.bounds)  # type: ignore[arg-type]
             if c.by != "agent":
@@ -168,6 +179,14 @@ class Coordinator:
             self.stale += 1
         return None
 
+    def _sector_answer(self, key: str) -> bytes:
+        """The current hour's forecast of the sector a query's key names."""
+        sector = Keys.agent_of(key)
+        if self.hour_forecast is None or sector is None or not 0 <= sector < self.city.n_sectors:
+            raise WireError(f"{key}: a query for the forecast of one sector 0..{self.city.n_sectors - 1}, once the run has begun")
+        hour, forecast = self.hour_forecast
+        return sector_message(forecast, self.city, hour, sector).encode()
+
     def full_state(self) -> bytes:
         return state_message(self.sim.observe(), None).encode()
 
@@ -178,6 +197,7 @@ class Coordinator:
             decls = [
                 inbox.serve(session, self.keys.spec, "spec"),
                 inbox.serve(session, self.keys.snapshot, "snapshot"),
+                inbox.serve(session, self.keys.all_forecasts, "forecast"),
                 inbox.subscribe(session, self.keys.all_controls, "control"),
                 inbox.watch_liveliness(session, self.keys.all_alive, "alive"),
             ]
@@ -202,7 +222,8 @@ class Coordinator:
 
     def _run(self, session, inbox: Inbox) -> dict:  # noqa: ANN001
         cfg, keys = self.cfg, self.keys
-        pub_state, pub_forecast, pub_stop = (publisher(session, k) for k in (keys.state, keys.forecast, keys.stop))
+        pub_state, pub_stop = (publisher(session, k) for k in (keys.state, keys.stop))
+        pub_forecast = ForecastPublisher(session, keys, self.city) if self.policy is not None else None
         turn_pub = {a: publisher(session, keys.turn(a)) for a in range(cfg.taxis)}
         commit_pub = {a: publisher(session, keys.committed(a)) for a in range(cfg.taxis)}
         self._wait_for_agents(inbox)
@@ -218,7 +239,7 @@ class Coordinator:
             obs = self.obs = self.sim.observe()
             if t % 60 == 0:
                 self.forecast_msg = self._forecast(session, inbox, t // 60)
-                pub_forecast.put(self.forecast_msg)
+                self._hold_forecast(pub_forecast, t // 60)
             pub_state.put(state_message(obs, previous).encode())
             previous = np.asarray(obs.req_index)
             base = base_controls(self.city, self.rollout, obs)
@@ -269,6 +290,14 @@ class Coordinator:
             "wall_seconds": time.perf_counter() - t_start,
         }
 
+    def _hold_forecast(self, pub: ForecastPublisher | None, hour: int) -> None:
+        """Keep the hour's forecast for snapshots and sector queries; publish it sector by sector unless the predictor did."""
+        msg = decode(self.forecast_msg, ForecastMsg)
+        forecast = Forecast(eta=msg.eta, rho=msg.rho, delta=msg.delta, beta=msg.beta)  # type: ignore[attr-defined]
+        self.hour_forecast = (hour, forecast)
+        if pub is not None:
+            pub.put(forecast, hour)
+
     def _forecast(self, session, inbox: Inbox, hour: int) -> bytes:  # noqa: ANN001
         """The encoded forecast of the episode's hour ``hour``: computed here, or asked of the predictor service."""
         if self.policy is not None:
@@ -279,7 +308,7 @@ class Coordinator:
         deadline = time.monotonic() + self.cfg.join_timeout_s
         last = "no answer"
         while time.monotonic() < deadline:
-            for reply in session.get(self.keys.predictor, payload=request, timeout=10.0):
+            for reply in session.get(self.keys.predictor, payload=request, encoding=ENCODING, timeout=10.0):
                 if reply.ok is None:
                     why = reply.err.payload.to_bytes().decode(errors="replace")
                     if why != "Timeout":

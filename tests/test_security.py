@@ -73,12 +73,14 @@ def test_every_key_has_one_writer_and_the_rules_follow_the_scheme() -> None:
                     granted.setdefault(f"{rule['flows'][0]} {msg} {k}", set()).update(pol["subjects"])
     writes = {"put", "declare_queryable", "reply", "liveliness_token"}
     for channel in SCHEME:
-        keys = [f"surge/r/{channel.name}/{i}" for i in range(4)] if channel.per_agent else [f"surge/r/{channel.name}"]
+        keys = [f"surge/r/{channel.name}/{i}" for i in range(4)] if channel.indexed else [f"surge/r/{channel.name}"]
         for i, k in enumerate(keys):
             writers = {s for g, subjects in granted.items() for s in subjects
                        if g.split()[0] == "ingress" and g.split()[1] in writes and g.split()[2] in (k, k.rsplit("/", 1)[0] + "/*")}
-            expected = {f"taxi-{i}"} if channel.writer == TAXI else {channel.writer}
+            expected = {f"taxi-{i}"} if channel.writer == TAXI else set(channel.writers)
             assert writers == expected, (k, writers)
+    assert {c.name: c.writers for c in SCHEME if len(c.writers) > 1} == {"forecast": ("coordinator", "predictor"),
+                                                                           "dropoffs": ("coordinator", "predictor")}
     mine = {(flow, msgs, k) for flow, msgs, k in grants(TAXI, 3, "r")}
     assert ("ingress", ("put",), "surge/r/control/3") in mine and ("egress", ("put",), "surge/r/turn/3") in mine
     assert not any(k.endswith("/turn/*") and flow == "egress" for flow, _, k in mine)  # a taxi sees only its own turns
@@ -120,7 +122,8 @@ def test_taxi_3s_certificate_can_do_only_what_taxi_3_does(secured: dict) -> None
     assert [s for s in seen if "forged" in s[2] or s[1].endswith("alive/4")] == []
     assert len(seen) == 3
     assert out["answers"] == {"taxi-0 spec": ["coordinator"], "taxi-0 snapshot": ["coordinator"],
-                              "coordinator predictor": ["predictor"], "taxi-4 spec": ["coordinator"]}
+                              "coordinator predictor": ["predictor"], "taxi-4 spec": ["coordinator"],
+                              "taxi-0 forecast/0": ["coordinator"]}
     assert secured["router"].poll() is None
 
 
@@ -194,11 +197,13 @@ def _agent(run: str = "u", me: int = 1):  # noqa: ANN202
     from agents.taxi import AgentConfig, TaxiAgent
     from bus.session import SessionArgs
     from bus.wire import RunSpec
+    from city.fingerprint import city_sha256, code_version
     from city.scenario import load_city
 
     agent = TaxiAgent(AgentConfig(index=me, run=run, bus=SessionArgs(mode="client", connect=["tcp/127.0.0.1:1"])))
     spec = RunSpec(run=run, scenario="synthetic", data_dir=None, city=load_city("synthetic").summary(), taxis=3, minutes=4,
-                   policy="surge", rollout={"samples": 4, "horizon": 2}, deadline_s=5.0)
+                   policy="surge", rollout={"samples": 4, "horizon": 2}, deadline_s=5.0,
+                   city_sha256=city_sha256(load_city("synthetic")), code=code_version())
     agent._accept_spec(spec.encode())
     from bus.checks import Bounds
 
@@ -241,10 +246,12 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
         ("committed", k.committed(0), Control(t=0, agent=0, control=2**40, by="agent").encode()),  # was an int32 overflow
         ("committed", k.committed(0), Control(t=0, agent=0, control=-5, by="agent").encode()),  # was a wrapped index
         ("committed", k.committed(2), Control(t=0, agent=0, control=ok, by="agent").encode()),  # another agent's key
-        ("committed", k.committed(0), Control(t=3, agent=0, control=ok, by="agent").encode()),  # not the current minute
-        ("turn", k.turn(1), Turn(t=2, agent=1).encode()),
+        ("committed", k.committed(0), Control(t=7, agent=0, control=ok, by="agent").encode()),  # not a minute of the episode
+        ("committed", k.committed(2), Control(t=2, agent=2, control=ok, by="agent").encode()),  # ahead of its state: held
+        ("turn", k.turn(1), Turn(t=7, agent=1).encode()),
+        ("turn", k.turn(1), Turn(t=3, agent=1).encode()),  # ahead of its state: held
         ("stop", k.stop, Stop(t=1).encode()),  # not the run's end: the agent stays
-        ("forecast", k.forecast, b"\x93\x01\x02"),
+        ("forecast", k.forecast(0), b"\x93\x01\x02"),
         ("committed", k.committed(0), Control(t=0, agent=0, control=ok, by="agent").encode()),
         ("stop", k.stop, Stop(t=4).encode()),
     ]:
@@ -253,13 +260,15 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
     err = capsys.readouterr().err
     for reason in ("field 'pos' has 2 taxis, the run has 3", f"field 'pos' holds {n}, outside 0..{n - 1}",
                    "control 1099511627776 of agent 0 is not one of its controls",
-                   "control of agent 0 on another agent's key", "field 't' is 3, the current minute is 0",
-                   "turn/1: field 't' is 2, the current minute is 0", "field 't' is 1, the run ends after minute 4", "forecast"):
+                   "control of agent 0 on another agent's key", "field 't' is 7, the current minute is 0",
+                   "turn/1: field 't' is 7, outside the episode's minutes 0..3", "field 't' is 1, the run ends after minute 4",
+                   "forecast"):
         assert reason in err, reason
     assert "control -5" not in err  # the same kind as 2**40's: counted, not logged again
     assert agent.rejected.counts["committed: surge/u/committed/N: control N of agent N is not one of its controls …"] == 2
     assert agent.view.obs is not None and agent.view.obs.t == 0
-    assert agent.committed == {0: {0: ok}}  # only the good commitment
+    assert agent.committed == {0: {0: ok}}  # only the good commitment of this minute ...
+    assert [c.t for c, _ in agent.early] == [2] and agent.pending == Turn(t=3, agent=1)  # ... and those ahead of their states
 
 
 def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> None:
@@ -281,7 +290,7 @@ def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> 
     assert coord._handle(("alive", k.alive(7), True), want) is None and coord.alive == set()
 
     class Gone:
-        def reply(self, *_):  # noqa: ANN002
+        def reply(self, *_, **__):  # noqa: ANN002, ANN003
             raise RuntimeError("the querier left")
 
         def drop(self) -> None:
