@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.forecast import Forecast
 from city.errors import ConfigError
+from city.forecast import Forecast
 from city.graph import City
 
 

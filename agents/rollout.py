@@ -73,13 +73,14 @@ import numpy as np
 
 from agents import _kernels as K
 from agents.base import EpisodeContext, Option, Policy, register
-from agents.forecast import PROVIDERS, Forecast, ForecastProvider, make_provider
+from agents.forecast import PROVIDERS, make_provider
 from agents.greedy import greedy_controls
 from agents.shortcuts import MINUTE_NEAR_K, PlanStats, Shortcuts, transposed
 from agents.ia import ia_controls
 from agents.demand_tables import DemandTables
 from agents.rollout_config import BASES, CE_MODES, NEAR_K, SCOPES, RolloutConfig, default_prune
 from city.errors import ConfigError
+from city.forecast import Forecast, ForecastProvider
 from city.graph import City
 from city.sim import PICKUP, Observation
 

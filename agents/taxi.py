@@ -1,8 +1,10 @@
 """One taxi as its own process on the bus: it follows the state, waits for its turn and plans its own control.
 
 The agent fetches the run's :class:`~bus.wire.RunSpec` from the coordinator,
-builds the static city once (from its on-disk cache), then reacts to what
-arrives: states and forecasts update its copy of the world, and a
+builds the static city once (from its on-disk cache) and refuses to join if
+its city's content hash is not the spec's; then it reacts to what arrives:
+states and the forecasts of the sectors it follows
+(:mod:`agents.sector_forecasts`) update its copy of the world, and a
 :class:`~bus.wire.Turn`, which carries the committed controls of the
 predecessors this agent depends on (:mod:`agents.waves`), makes it run
 :func:`agents.rollout.plan_agent`, exactly the function the in-process
@@ -40,15 +42,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.forecast import Forecast
-from agents.rollout import DemandTables, RolloutConfig, StepContext, candidate_controls, plan_agent, prepare_step, warm_up
-from bus.checks import (Bounds, Rejections, check_choice, check_forecast, check_spec, check_state,
-                        check_stop, check_turn)
+from agents.rollout import RolloutConfig, StepContext, candidate_controls, plan_agent, prepare_step, warm_up
+from agents.sector_forecasts import AgentForecasts, needed_sectors
+from bus.checks import Bounds, Rejections, check_choice, check_spec, check_state, check_stop, check_turn
 from bus.delta import StateView
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
 from bus.wire import Ack, Control, ForecastMsg, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
 from city.errors import ConfigError, SurgeError
+from city.fingerprint import city_sha256, code_version
 
 
 @dataclass(frozen=True)
@@ -85,8 +87,11 @@ class TaxiAgent:
         self.keys = Keys(config.run)
         self.me = config.index
         self.view = StateView()
-        self.tables: dict[int, DemandTables] = {}
+        #: Set by the accepted run spec, with the city.
+        self.forecasts: AgentForecasts
         self.pending: Turn | None = None
+        #: The minute whose turn made this taxi ask the coordinator for missing forecast pieces (once a turn).
+        self.asked: int | None = None
         self.context: StepContext | None = None
         self.decisions = 0
         self.rejected = Rejections(lambda m: log(self.me, m))
@@ -108,12 +113,13 @@ class TaxiAgent:
             inbox = Inbox()
             subs = [
                 inbox.subscribe(session, self.keys.state, "state"),
-                inbox.subscribe(session, self.keys.forecast, "forecast"),
+                inbox.subscribe(session, self.keys.dropoffs, "dropoffs"),
                 inbox.subscribe(session, self.keys.turn(self.me), "turn"),
                 inbox.subscribe(session, self.keys.stop, "stop"),
             ]
             spec = self._fetch_spec(session)
             self.bounds = Bounds(taxis=spec.taxis, nodes=self.city.n_nodes, sectors=self.city.n_sectors, minutes=spec.minutes)
+            self.forecasts.attach(session, inbox, self.keys)
             self._warm_up()
             out = publisher(session, self.keys.control(self.me))
             self.ack_pub = publisher(session, self.keys.ack(self.me))
@@ -126,6 +132,7 @@ class TaxiAgent:
                 self._loop(session, inbox, out)
             finally:
                 token.undeclare()
+                self.forecasts.close()
                 for s in subs:
                     s.undeclare()
         return self.decisions
@@ -144,6 +151,8 @@ class TaxiAgent:
                     continue
                 try:
                     return self._accept_spec(reply.ok.payload.to_bytes())
+                except OtherCity:
+                    raise
                 except Exception as exc:  # a spec this agent cannot run: drop it, ask again
                     why = str(exc)
                     self.rejected.exception("spec", self.keys.spec, exc)
@@ -172,7 +181,16 @@ class TaxiAgent:
             raise city
         if city.summary() != spec.city:
             raise WireError(f"{self.keys.spec}: this host's {spec.scenario} city {city.summary()} is not the coordinator's {spec.city}")
+        mine = city_sha256(city)
+        if mine != spec.city_sha256:
+            raise OtherCity(f"agent {self.me} does not join run {spec.run!r}: this host's {spec.scenario} city has content hash "
+                            f"{mine[:16]}…, the coordinator's {spec.city_sha256[:16]}… (same sizes, other streets, sectors "
+                            f"or pickup intersections; rebuild the city from the same data)")
+        if spec.code != code_version():
+            log(self.me, f"warning: this host runs {code_version()}, the coordinator {spec.code}; decisions may differ from its reference")
         self.city, self.rollout = city, rollout
+        bounds = Bounds(taxis=spec.taxis, nodes=city.n_nodes, sectors=city.n_sectors, minutes=spec.minutes)
+        self.forecasts = AgentForecasts(city, rollout, bounds, self.rejected)
         return spec
 
     def _snapshot(self, session) -> None:  # noqa: ANN001
@@ -193,6 +211,7 @@ class TaxiAgent:
                 continue
             self.view.apply(state)
             self.context = None
+            self._follow()
             self._ack()
             return
 
@@ -202,9 +221,16 @@ class TaxiAgent:
             self.ack_pub.put(Ack(t=int(self.view.obs.t), agent=self.me).encode())
 
     def _on_forecast(self, msg: ForecastMsg) -> None:
-        check_forecast(msg, self.keys.forecast, self.bounds)
-        fc = Forecast(eta=msg.eta, rho=msg.rho, delta=msg.delta, beta=msg.beta)
-        self.tables[msg.hour] = DemandTables.build(self.city, fc, self.rollout.ce, self.rollout.seed)
+        self.forecasts.on_whole(msg, self.keys.snapshot)
+
+    def _follow(self) -> None:
+        """Follow the sectors this taxi plans in next: where it is, or where it is free again when busy."""
+        obs = self.view.obs
+        if obs is None:
+            return
+        node = int(obs.pos[self.me]) if obs.tau[self.me] == 0 or obs.dest[self.me] < 0 else int(obs.dest[self.me])
+        self.forecasts.forget_before(int(obs.t) // 60)
+        self.forecasts.follow(needed_sectors(self.city, self.rollout, node), int(obs.t) // 60)
 
     def _minute(self) -> int | None:
         return None if self.view.obs is None else int(self.view.obs.t)
@@ -222,13 +248,15 @@ class TaxiAgent:
         if tag == "state":
             msg = check_state(decode(payload, State, key), key, self.bounds)  # type: ignore[arg-type]
             if self.view.apply(msg):
+                self._follow()
                 self._ack()
             else:
                 self._snapshot(session)
             self.context = None
         elif tag == "forecast":
-            self._on_forecast(decode(payload, ForecastMsg, key))  # type: ignore[arg-type]
-            self.context = None
+            self.forecasts.on_sector(payload, key)
+        elif tag == "dropoffs":
+            self.forecasts.on_dropoffs(payload, key)
         elif tag == "turn":
             turn = decode(payload, Turn, key)
             minute = self._minute()
@@ -300,10 +328,18 @@ class TaxiAgent:
     def _prepare(self) -> None:
         """Build the minute's shared context as soon as the state and forecast are in, while earlier agents plan."""
         obs = self.view.obs
-        if obs is None or obs.t // 60 not in self.tables or obs.tau[self.me] > 0:
+        if obs is None or obs.tau[self.me] > 0:
             return
         if self.context is None or self.context.obs.t != obs.t:
-            self.context = prepare_step(self.city, self.rollout, obs, self.tables[obs.t // 60], obs.t % 60, base=self.view.base)
+            hour, sectors = int(obs.t) // 60, needed_sectors(self.city, self.rollout, int(obs.pos[self.me]))
+            tables = self.forecasts.tables(hour, sectors)
+            if tables is None and self.pending is not None and self.pending.t == obs.t and self.asked != obs.t:
+                self.asked = int(obs.t)
+                self.forecasts.fetch(hour, sectors)  # its turn, and a piece it follows never came: ask for it
+                tables = self.forecasts.tables(hour, sectors)
+            if tables is None:
+                return
+            self.context = prepare_step(self.city, self.rollout, obs, tables, obs.t % 60, base=self.view.base)
 
     def _maybe_plan(self, out) -> None:  # noqa: ANN001
         turn, obs = self.pending, self.view.obs
@@ -324,6 +360,10 @@ class TaxiAgent:
         self.sent, self.sent_with = Control(t=turn.t, agent=self.me, control=int(control), plan_s=plan_s, rss_mb=rss_mb), committed
         out.put(self.sent.encode())
         self.decisions += 1
+
+
+class OtherCity(ConfigError):
+    """The coordinator's city is not this host's: the agent refuses to join rather than plan on another map."""
 
 
 def agent_main(config: AgentConfig) -> int:

@@ -23,7 +23,9 @@ side, and a publisher that knows of none sends nothing.
 A taxi writes only its own per-agent keys (``control/<i>``, ``alive/<i>``)
 and reads only its own ``turn/<i>``.  So one key has one writer: nobody but
 the coordinator can publish a state, a turn, a committed control or stop, or
-answer ``spec``; nobody but taxi *i* can propose taxi *i*'s control.
+answer ``spec``; nobody but taxi *i* can propose taxi *i*'s control.  The
+forecast keys are the exception the scheme names: the predictor service or
+the coordinator may publish them (``also_written_by``).
 """
 
 from __future__ import annotations
@@ -52,6 +54,8 @@ _DECLARATIONS = {"declare_subscriber", "declare_queryable"}
 def _key_for(channel: Channel, run_root: str, role: str, index: int | None, writing: bool, flow: str,
              messages: tuple[str, ...]) -> str:
     """A taxi's own per-agent key, or every agent's; a writer learns of subscriptions to every agent's."""
+    if channel.per_sector:
+        return key(run_root, channel.name, "*")
     if not channel.per_agent:
         return key(run_root, channel.name)
     learning = flow == EGRESS and _DECLARATIONS.issuperset(messages)
@@ -64,10 +68,13 @@ def grants(role: str, index: int | None = None, run: str | None = None) -> list[
     run_root = root(run)
     out = []
     for channel in SCHEME:
-        for writing, applies in ((True, channel.writer == role), (False, role in channel.readers)):
+        uses = [(channel.use, True, role in channel.writers), (channel.use, False, role in channel.readers)]
+        if channel.answered_by is not None:
+            uses += [(QUERYABLE, True, role == channel.answered_by), (QUERYABLE, False, role in channel.readers)]
+        for use, writing, applies in uses:
             if applies:
                 out += [(flow, msgs, _key_for(channel, run_root, role, index, writing, flow, msgs))
-                        for flow, msgs in _MESSAGES[(channel.use, writing)]]
+                        for flow, msgs in _MESSAGES[(use, writing)]]
     return out
 
 

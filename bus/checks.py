@@ -15,13 +15,13 @@ from __future__ import annotations
 import math
 import re
 from collections import Counter
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from bus.keys import Keys
-from bus.wire import Ack, Control, ForecastMsg, RunSpec, State, Stop, Turn, WireError
+from bus.wire import Ack, Control, Dropoffs, ForecastMsg, RunSpec, SectorForecast, State, Stop, Turn, WireError
 
 #: The largest values a sane message carries: minutes a taxi stays busy, and the reported seconds and megabytes.
 MAX_BUSY = 24 * 60
@@ -85,6 +85,39 @@ def check_forecast(msg: ForecastMsg, key: str, b: Bounds) -> ForecastMsg:
     return msg
 
 
+def _rates(key: str, name: str, arr: np.ndarray) -> None:
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise WireError(f"{key}: field {name!r} holds a negative or non-finite rate")
+
+
+def check_sector_forecast(msg: SectorForecast, key: str, b: Bounds, sector_nodes: Sequence[np.ndarray]) -> SectorForecast:
+    """One sector's forecast on its own sector's key, laid out over that sector's intersections (``sector_nodes[sector]``)."""
+    if not 0 <= msg.hour < b.hours:
+        raise WireError(f"{key}: field 'hour' is {msg.hour}, the episode has hours 0..{b.hours - 1}")
+    if Keys.agent_of(key) != msg.sector or not 0 <= msg.sector < b.sectors:
+        raise WireError(f"{key}: field 'sector' is {msg.sector}, on the key of sector {Keys.agent_of(key)} of 0..{b.sectors - 1}")
+    nodes = sector_nodes[msg.sector]
+    if not np.array_equal(msg.nodes, nodes):
+        raise WireError(f"{key}: field 'nodes' is not sector {msg.sector}'s {nodes.size} intersections in ascending order")
+    for name, size in (("rho", nodes.size), ("delta", nodes.size), ("beta", b.sectors)):
+        arr = getattr(msg, name)
+        if arr.shape != (size,):
+            raise WireError(f"{key}: field {name!r} has shape {list(arr.shape)}, sector {msg.sector} needs [{size}]")
+        _rates(key, name, arr)
+    _rates(key, "eta", np.array([msg.eta]))
+    return msg
+
+
+def check_dropoffs(msg: Dropoffs, key: str, b: Bounds) -> Dropoffs:
+    """The map-wide drop-off distribution of an hour of this episode, one entry per intersection."""
+    if not 0 <= msg.hour < b.hours:
+        raise WireError(f"{key}: field 'hour' is {msg.hour}, the episode has hours 0..{b.hours - 1}")
+    if msg.delta.shape != (b.nodes,):
+        raise WireError(f"{key}: field 'delta' has shape {list(msg.delta.shape)}, this city needs [{b.nodes}]")
+    _rates(key, "delta", msg.delta)
+    return msg
+
+
 def check_control(msg: Control, key: str, b: Bounds, t: int | None = None) -> Control:
     """A control on its own agent's key, for an agent of this fleet (and minute ``t``), with sane reports."""
     if Keys.agent_of(key) != msg.agent:
@@ -111,10 +144,14 @@ def check_choice(msg: Control, key: str, candidates: np.ndarray) -> Control:
 
 
 def check_turn(msg: Turn, key: str, me: int, b: Bounds, t: int | None) -> Turn:
-    """A turn for this agent at the current minute ``t`` or the next (whose state may be on its way; any minute while it has none)."""
+    """A turn for this agent at the current minute ``t`` or a later one of the episode.
+
+    Zenoh orders samples per key, not across keys: a turn can overtake the
+    states before it by many minutes, and the agent holds it until its state.
+    """
     if msg.agent != me or Keys.agent_of(key) != me:
         raise WireError(f"{key}: a turn for agent {msg.agent}, this is agent {me}")
-    if t is not None and msg.t not in (t, t + 1):
+    if t is not None and msg.t < t:
         raise WireError(f"{key}: field 't' is {msg.t}, the current minute is {t}")
     if not 0 <= msg.t < b.minutes:
         raise WireError(f"{key}: field 't' is {msg.t}, outside the episode's minutes 0..{b.minutes - 1}")
@@ -155,6 +192,8 @@ def check_spec(spec: RunSpec, key: str, settings: Iterable[str]) -> RunSpec:
         raise WireError(f"{key}: a run of {spec.taxis} taxis and {spec.minutes} minutes")
     if not (math.isfinite(spec.deadline_s) and spec.deadline_s > 0):
         raise WireError(f"{key}: field 'deadline_s' is {spec.deadline_s!r}")
+    if not re.fullmatch(r"[0-9a-f]{64}", spec.city_sha256):
+        raise WireError(f"{key}: field 'city_sha256' is not 64 hex digits")
     return spec
 
 

@@ -11,7 +11,9 @@ key                        who writes                  what
 ``spec``                   coordinator (queryable)     :class:`~bus.wire.RunSpec`
 ``snapshot``               coordinator (queryable)     :class:`~bus.wire.Snapshot`
 ``state``                  coordinator                 :class:`~bus.wire.State` each minute
-``forecast``               coordinator                 :class:`~bus.wire.ForecastMsg` each hour
+``forecast/<sector>``      coordinator or predictor    :class:`~bus.wire.SectorForecast` each hour;
+                           (coordinator answers)       the coordinator answers queries for the current hour
+``dropoffs``               coordinator or predictor    :class:`~bus.wire.Dropoffs` each hour
 ``turn/<agent>``           coordinator                 :class:`~bus.wire.Turn`
 ``control/<agent>``        agent                       proposed :class:`~bus.wire.Control`
 ``committed/<agent>``      coordinator                 committed :class:`~bus.wire.Control`
@@ -21,6 +23,10 @@ key                        who writes                  what
 ``coordinator``            coordinator (liveliness)    present while the coordinator runs
 ``ack/<agent>``            agent                       :class:`~bus.wire.Ack`: the agent holds minute ``t``'s state
 =========================  ==========================  ==============================
+
+The forecast keys have two possible writers: the predictor service when the
+run has one, else the coordinator.  ``docs/PROTOCOL.md`` is this table for a
+third party, with every message's fields.
 """
 
 from __future__ import annotations
@@ -43,8 +49,11 @@ PUB, QUERYABLE, TOKEN = "pub", "queryable", "token"
 class Channel:
     """One key of the scheme.
 
-    ``per_agent`` keys end in an agent index.  A taxi writes only its own
-    per-agent keys; with ``own_only`` it also reads only its own.
+    ``per_agent`` keys end in an agent index, ``per_sector`` keys in a
+    sector index.  A taxi writes only its own per-agent keys; with
+    ``own_only`` it also reads only its own.  ``also_written_by`` are roles
+    that may publish on the key besides ``writer``; ``answered_by`` is a role
+    that also answers the readers' queries on it.
     """
 
     name: str
@@ -53,13 +62,26 @@ class Channel:
     writer: str
     readers: tuple[str, ...]
     own_only: bool = False
+    per_sector: bool = False
+    also_written_by: tuple[str, ...] = ()
+    answered_by: str | None = None
+
+    @property
+    def writers(self) -> tuple[str, ...]:
+        return (self.writer, *self.also_written_by)
+
+    @property
+    def indexed(self) -> bool:
+        """The key ends in an index (an agent's or a sector's)."""
+        return self.per_agent or self.per_sector
 
 
 SCHEME: tuple[Channel, ...] = (
     Channel("spec", False, QUERYABLE, COORDINATOR, (TAXI,)),
     Channel("snapshot", False, QUERYABLE, COORDINATOR, (TAXI,)),
     Channel("state", False, PUB, COORDINATOR, (TAXI,)),
-    Channel("forecast", False, PUB, COORDINATOR, (TAXI,)),
+    Channel("forecast", False, PUB, COORDINATOR, (TAXI,), per_sector=True, also_written_by=(PREDICTOR,), answered_by=COORDINATOR),
+    Channel("dropoffs", False, PUB, COORDINATOR, (TAXI,), also_written_by=(PREDICTOR,)),
     Channel("turn", True, PUB, COORDINATOR, (TAXI,), own_only=True),
     Channel("control", True, PUB, TAXI, (COORDINATOR,)),
     Channel("committed", True, PUB, COORDINATOR, (TAXI,)),
@@ -82,10 +104,10 @@ def root(run: str | None) -> str:
 
 
 def key(run_root: str, name: str, agent: int | str | None = None) -> str:
-    """The key of channel ``name`` (for agent ``agent``, an index or ``*``, on a per-agent channel)."""
+    """The key of channel ``name`` (for agent or sector ``agent``, an index or ``*``, on an indexed channel)."""
     channel = CHANNELS[name]
-    if channel.per_agent != (agent is not None):
-        raise ValueError(f"channel {name!r} {'needs' if channel.per_agent else 'takes no'} agent index")
+    if channel.indexed != (agent is not None):
+        raise ValueError(f"channel {name!r} {'needs' if channel.indexed else 'takes no'} index")
     return f"{run_root}/{name}" if agent is None else f"{run_root}/{name}/{agent}"
 
 
@@ -98,7 +120,8 @@ class Keys:
         self.spec = key(self.root, "spec")
         self.snapshot = key(self.root, "snapshot")
         self.state = key(self.root, "state")
-        self.forecast = key(self.root, "forecast")
+        self.dropoffs = key(self.root, "dropoffs")
+        self.all_forecasts = key(self.root, "forecast", "*")
         self.stop = key(self.root, "stop")
         self.predictor = key(self.root, "predictor")
         self.all_controls = key(self.root, "control", "*")
@@ -106,6 +129,9 @@ class Keys:
         self.all_alive = key(self.root, "alive", "*")
         self.coordinator = key(self.root, "coordinator")
         self.all_acks = key(self.root, "ack", "*")
+
+    def forecast(self, sector: int) -> str:
+        return key(self.root, "forecast", sector)
 
     def turn(self, agent: int) -> str:
         return key(self.root, "turn", agent)
@@ -124,6 +150,6 @@ class Keys:
 
     @staticmethod
     def agent_of(key: str) -> int | None:
-        """The agent index a per-agent key ends with, or ``None``."""
+        """The agent (or sector) index an indexed key ends with, or ``None``."""
         last = str(key).rsplit("/", 1)[-1]
         return int(last) if last.isdigit() else None

@@ -27,6 +27,7 @@ import zenoh
 
 from bus.access import access_control
 from bus.certs import fleet_size, identity
+from bus.wire import ENCODING
 from city.errors import ConfigError
 
 MODES = ("peer", "client", "router")
@@ -216,5 +217,6 @@ class Inbox:
 
 
 def publisher(session: zenoh.Session, key: str) -> Any:
-    """A publisher for turn, clock and control traffic: reliable, and blocking rather than dropping."""
-    return session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE)
+    """A publisher for turn, clock and control traffic: reliable, blocking rather than dropping, msgpack-encoded."""
+    return session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE,
+                                     encoding=ENCODING)

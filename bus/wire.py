@@ -6,7 +6,8 @@ little-endian float64 bytes with their shape, so an agent rebuilds exactly
 the arrays the coordinator holds and the rollout's decisions match the
 in-process run bit for bit.  A message that does not decode raises
 :class:`WireError` naming the key expression and the field; receivers log it
-in one line and go on.
+in one line and go on.  ``docs/PROTOCOL.md`` is the same format written for
+a third party, with the versioning rules.
 """
 
 from __future__ import annotations
@@ -21,7 +22,10 @@ import numpy as np
 
 from city.errors import SurgeError
 
-WIRE_VERSION = 1
+#: The zenoh encoding every payload of the run carries.
+ENCODING = "application/msgpack"
+#: Bumped whenever a message gains, loses or changes a field (docs/PROTOCOL.md, versioning).
+WIRE_VERSION = 2
 
 
 class WireError(SurgeError, ValueError):
@@ -132,7 +136,10 @@ class RunSpec(Message):
     """What an agent needs to join a run: the static city by name, the episode and the planner's settings.
 
     The city itself is not sent: every host builds it from ``scenario`` (and
-    ``data_dir`` for real maps), once, from its on-disk cache.
+    ``data_dir`` for real maps), once, from its on-disk cache.  ``city_sha256``
+    (:func:`city.fingerprint.city_sha256`) lets an agent refuse a city that is
+    not the coordinator's even when its sizes agree; ``code`` names the
+    coordinator's code, so a host running other code can say so.
     """
 
     kind: ClassVar[str] = "spec"
@@ -145,6 +152,8 @@ class RunSpec(Message):
     policy: str
     rollout: dict
     deadline_s: float
+    city_sha256: str
+    code: str
 
 
 @dataclass(frozen=True)
@@ -158,6 +167,31 @@ class ForecastMsg(Message):
     rho: np.ndarray
     delta: np.ndarray
     beta: np.ndarray
+
+
+@dataclass(frozen=True)
+class SectorForecast(Message):
+    """Sector ``sector``'s part of the forecast of hour ``hour``: η, and ρ, δ over ``nodes``, and β's row."""
+
+    kind: ClassVar[str] = "sector-forecast"
+    arrays: ClassVar[dict[str, str]] = {"nodes": I32, "rho": F64, "delta": F64, "beta": F64}
+    hour: int
+    sector: int
+    eta: float
+    nodes: np.ndarray
+    rho: np.ndarray
+    delta: np.ndarray
+    beta: np.ndarray
+
+
+@dataclass(frozen=True)
+class Dropoffs(Message):
+    """What a local rollout needs of hour ``hour``'s forecast beyond its own sectors: the drop-off distribution δ over the map."""
+
+    kind: ClassVar[str] = "dropoffs"
+    arrays: ClassVar[dict[str, str]] = {"delta": F64}
+    hour: int
+    delta: np.ndarray
 
 
 @dataclass(frozen=True)

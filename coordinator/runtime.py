@@ -1,8 +1,9 @@
 """The coordinator of a distributed run: the clock, the ground-truth world and the order of turns.
 
 Each minute it publishes the state (a delta, with the minute's base
-controls) and, at each hour, the forecast; then it releases the free taxis'
-turns in dependency waves (:func:`agents.waves.plan_waves`, the same graph
+controls) and, at each hour, the forecast sector by sector (unless a
+predictor service does; it answers a taxi's query for a sector it missed
+either way); then it releases the free taxis' turns in dependency waves (:func:`agents.waves.plan_waves`, the same graph
 the in-process policy plans by): every agent of a wave gets its turn at
 once, with the committed controls of the predecessors it depends on, and
 the next wave starts when the wave's controls are committed.  A
@@ -42,10 +43,13 @@ from agents.rollout import RolloutConfig, RolloutPolicy, base_controls, candidat
 from agents.waves import Waves, plan_waves
 from bus.checks import Bounds, Rejections, check_ack, check_choice, check_control, check_forecast
 from bus.delta import state_message
+from bus.forecasts import ForecastPublisher, sector_message
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
-from bus.wire import Ack, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
+from bus.wire import ENCODING, Ack, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
 from city.errors import ConfigError
+from city.fingerprint import city_sha256, code_version
+from city.forecast import Forecast
 from city.sim import FleetSim, Observation, Requests, decisions_hash
 from coordinator import checkpoint
 from coordinator.faults import ACK_WAIT_S, RESEND_S, SETTLE_S, Health, PartitionError, agents_text
@@ -137,9 +141,11 @@ class Coordinator:
         self.sim = FleetSim(self.city, requests, start)
         self.spec = RunSpec(run=config.run, scenario=config.scenario, data_dir=config.data_dir, city=self.city.summary(), taxis=config.taxis,
                             minutes=config.minutes, policy=config.policy, rollout=asdict(self.rollout),
-                            deadline_s=config.deadline_s)
+                            deadline_s=config.deadline_s, city_sha256=city_sha256(self.city), code=code_version())
         self.health = Health(config.taxis, log)
         self.forecast_msg = b""
+        #: The current hour and its forecast, for the sector queries of taxis that missed a piece.
+        self.hour_forecast: tuple[int, Forecast] | None = None
         #: Where the run's checkpoint is written each minute (``None``: nowhere).
         self.run_dir = None if run_dir is None else Path(run_dir)
         self.tally = checkpoint.Tally.fresh(config.minutes, config.taxis)
@@ -188,9 +194,14 @@ class Coordinator:
         elif tag in ("spec", "snapshot"):
             try:
                 answer = self.spec if tag == "spec" else self._snapshot()
-                payload.reply(key, answer.encode())  # type: ignore[attr-defined]
+                payload.reply(key, answer.encode(), encoding=ENCODING)  # type: ignore[attr-defined]
             finally:
                 payload.drop()  # type: ignore[attr-defined]  # ends the asker's get() now, not when the query is collected
+        elif tag == "forecast":
+            try:
+                payload.reply(key, self._sector_answer(key), encoding=ENCODING)  # type: ignore[attr-defined]
+            finally:
+                payload.drop()  # type: ignore[attr-defined]
         elif tag == "control":
             self.tally.traffic.received(payload)  # type: ignore[arg-type]
             c = check_control(decode(payload, Control, key), key, self.bounds)  # type: ignore[arg-type]
@@ -203,6 +214,14 @@ class Coordinator:
                 return c
             self.tally.stale += 1
         return None
+
+    def _sector_answer(self, key: str) -> bytes:
+        """The current hour's forecast of the sector a query's key names."""
+        sector = Keys.agent_of(key)
+        if self.hour_forecast is None or sector is None or not 0 <= sector < self.city.n_sectors:
+            raise WireError(f"{key}: a query for the forecast of one sector 0..{self.city.n_sectors - 1}, once the run has begun")
+        hour, forecast = self.hour_forecast
+        return sector_message(forecast, self.city, hour, sector).encode()
 
     def full_state(self) -> bytes:
         obs = self.sim.observe()
@@ -221,6 +240,7 @@ class Coordinator:
             decls = [
                 inbox.serve(session, self.keys.spec, "spec"),
                 inbox.serve(session, self.keys.snapshot, "snapshot"),
+                inbox.serve(session, self.keys.all_forecasts, "forecast"),
                 inbox.subscribe(session, self.keys.all_controls, "control"),
                 inbox.subscribe(session, self.keys.all_acks, "ack"),
                 inbox.watch_liveliness(session, self.keys.all_alive, "alive"),
@@ -265,9 +285,13 @@ class Coordinator:
 
     def _run(self, session, inbox: Inbox) -> dict:  # noqa: ANN001
         cfg, keys = self.cfg, self.keys
-        pub_state, pub_forecast = (Counted(publisher(session, k), self.tally.traffic) for k in (keys.state, keys.forecast))
-        turn_pub = {a: Counted(publisher(session, keys.turn(a)), self.tally.traffic) for a in range(cfg.taxis)}
-        commit_pub = {a: Counted(publisher(session, keys.committed(a)), self.tally.traffic) for a in range(cfg.taxis)}
+        def counted(pub: Any) -> Counted:  # every message the coordinator sends is counted
+            return Counted(pub, self.tally.traffic)
+
+        pub_state = counted(publisher(session, keys.state))
+        pub_forecast = ForecastPublisher(session, keys, self.city, wrap=counted) if self.policy is not None else None
+        turn_pub = {a: counted(publisher(session, keys.turn(a))) for a in range(cfg.taxis)}
+        commit_pub = {a: counted(publisher(session, keys.committed(a))) for a in range(cfg.taxis)}
         self._wait_for_agents(inbox)
         joined_at = time.time()
         tally = self.tally
@@ -283,7 +307,7 @@ class Coordinator:
             obs = self.obs = self.sim.observe()
             if t % 60 == 0 or t == first:
                 self.forecast_msg = self._forecast(session, inbox, t // 60)
-                pub_forecast.put(self.forecast_msg)
+                self._hold_forecast(pub_forecast, t // 60)
             base = base_controls(self.city, self.rollout, obs)
             pub_state.put(state_message(obs, previous, base).encode())
             previous = np.asarray(obs.req_index)
@@ -350,6 +374,14 @@ class Coordinator:
             "resumed_at_minute": first if first else None,
         }
 
+    def _hold_forecast(self, pub: ForecastPublisher | None, hour: int) -> None:
+        """Keep the hour's forecast for snapshots and sector queries; publish it sector by sector unless the predictor did."""
+        msg = decode(self.forecast_msg, ForecastMsg)
+        forecast = Forecast(eta=msg.eta, rho=msg.rho, delta=msg.delta, beta=msg.beta)  # type: ignore[attr-defined]
+        self.hour_forecast = (hour, forecast)
+        if pub is not None:
+            pub.put(forecast, hour)
+
     def _forecast(self, session, inbox: Inbox, hour: int) -> bytes:  # noqa: ANN001
         """The encoded forecast of the episode's hour ``hour``: computed here, or asked of the predictor service."""
         if self.policy is not None:
@@ -360,7 +392,7 @@ class Coordinator:
         deadline = time.monotonic() + self.cfg.join_timeout_s
         last = "no answer"
         while time.monotonic() < deadline:
-            for reply in session.get(self.keys.predictor, payload=request, timeout=10.0):
+            for reply in session.get(self.keys.predictor, payload=request, encoding=ENCODING, timeout=10.0):
                 if reply.ok is None:
                     why = reply.err.payload.to_bytes().decode(errors="replace")
                     if why != "Timeout":

@@ -15,7 +15,7 @@ that file (found again through ``model.json``, its SHA-256 checked), not from
 the world's own synthetic events; a model trained on the world's events uses
 the world's.
 
-It returns the rollout's torch-free ``agents.forecast.Forecast``.
+It returns the shared world model's torch-free :class:`city.forecast.Forecast`.
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.forecast import Forecast
 from city.errors import ConfigError
+from city.forecast import Forecast
 from predictor.assign import estimate_beta, node_distribution
 from predictor.features import active_events
 from predictor.model import DemandModel

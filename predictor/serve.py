@@ -2,6 +2,9 @@
 
 With it, the coordinator asks for each hour's forecast over zenoh instead of
 computing it, so the trained model (and torch) lives in this one process.
+The service publishes the hour's forecast sector by sector for the taxis
+(:mod:`bus.forecasts`), then answers the coordinator with the whole of it,
+which the coordinator keeps for snapshots.
 Any forecast provider can be served (``model`` is the point; ``true-rate`` and
 ``previous-hour`` need no training and make the service easy to try).  A bad
 request gets an error reply naming the field, and the service keeps serving.
@@ -13,10 +16,15 @@ import datetime as dt
 import sys
 from dataclasses import dataclass
 
+from pathlib import Path
+from typing import Any
+
+from bus.forecasts import ForecastPublisher
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session
-from bus.wire import ForecastMsg, ForecastRequest, decode
-from city.errors import SurgeError
+from bus.wire import ENCODING, ForecastMsg, ForecastRequest, decode
+from city.errors import ConfigError, SurgeError
+from city.forecast import Forecast
 
 
 @dataclass(frozen=True)
@@ -39,28 +47,27 @@ class ForecastService:
     """Answers :class:`~bus.wire.ForecastRequest` queries on ``surge/<run>/predictor``."""
 
     def __init__(self, config: ServeConfig) -> None:
-        from agents.forecast import make_provider
         from city.scenario import load_scenario
 
         self.cfg = config
         self.keys = Keys(config.run)
-        self.provider = make_provider(config.forecast, config.model)
+        self.provider = _provider(config.forecast, config.model)
         self.world = load_scenario(config.scenario, config.data_dir, seed=config.world_seed).world
         if config.forecast == "model" and config.model is not None:
             self.world = _world_for_model(config, self.world)
         self.answered = 0
 
-    def answer(self, payload: bytes) -> bytes:
-        """The encoded forecast for one encoded request; :class:`SurgeError` for a bad one."""
+    def answer(self, payload: bytes) -> tuple[int, Forecast]:
+        """The episode hour and forecast one encoded request asks for; :class:`SurgeError` for a bad one."""
         req = decode(payload, ForecastRequest, self.keys.predictor)
-        fc = self.provider.forecast(self.world, dt.datetime.fromisoformat(req.when))  # type: ignore[attr-defined]
-        return ForecastMsg(hour=req.hour, eta=fc.eta, rho=fc.rho, delta=fc.delta, beta=fc.beta).encode()  # type: ignore[attr-defined]
+        return req.hour, self.provider.forecast(self.world, dt.datetime.fromisoformat(req.when))  # type: ignore[attr-defined]
 
     def run(self, bus: SessionArgs) -> None:
         """Serve until interrupted."""
         with open_session(bus) as session:
             inbox = Inbox()
             queryable = inbox.serve(session, self.keys.predictor, "query")
+            sectors = ForecastPublisher(session, self.keys, self.world.city)
             log(f"serving {self.cfg.forecast} forecasts for run {self.cfg.run!r} on {self.keys.predictor}")
             try:
                 while True:
@@ -70,7 +77,10 @@ class ForecastService:
                     query = item[2]
                     payload = query.payload.to_bytes() if query.payload is not None else b""
                     try:
-                        query.reply(self.keys.predictor, self.answer(payload))
+                        hour, fc = self.answer(payload)
+                        sectors.put(fc, hour)
+                        whole = ForecastMsg(hour=hour, eta=fc.eta, rho=fc.rho, delta=fc.delta, beta=fc.beta)
+                        query.reply(self.keys.predictor, whole.encode(), encoding=ENCODING)
                         self.answered += 1
                     except Exception as exc:  # a bad request, or one the provider cannot answer: refuse it, keep serving
                         why = str(exc) if isinstance(exc, SurgeError) else f"{type(exc).__name__}: {exc}"
@@ -82,6 +92,22 @@ class ForecastService:
                 queryable.undeclare()
 
 
+def _provider(name: str, model: str | None) -> Any:
+    """The provider to serve: the trained model, or one of :mod:`city.forecast`'s (the agents' registry is not imported here)."""
+    from city.forecast import PROVIDERS
+
+    if name == "model":
+        if model is None or not Path(model).is_dir():
+            raise ConfigError(f"forecast 'model' needs a trained predictor: run `surge predictor train …` and pass --model DIR"
+                              f"{'' if model is None else f' ({model} is not a directory)'}")
+        from predictor.forecast import load_forecaster
+
+        return load_forecaster(model)
+    if name not in PROVIDERS:
+        raise ConfigError(f"unknown forecast {name!r}; choose from {', '.join(sorted([*PROVIDERS, 'model']))}")
+    return PROVIDERS[name]()
+
+
 def _world_for_model(config: ServeConfig, world):
     """The served world with the model's recorded events and trips in place of the scenario's own.
 
@@ -90,9 +116,7 @@ def _world_for_model(config: ServeConfig, world):
     the first query, and a model trained on another scenario.
     """
     import json
-    from pathlib import Path
 
-    from city.errors import ConfigError
     from predictor.inputs import RealInputsWorld, read_event_file, recorded_paths
 
     meta = json.loads((Path(config.model) / "model.json").read_text())

@@ -40,8 +40,12 @@ def try_open(conf: zenoh.Config):  # noqa: ANN201
         return None
 
 
+#: The wire version of docs/PROTOCOL.md: what an outsider writes from the document.
+WIRE = 2
+
+
 def control(t: int, agent: int, value: int, **extra) -> bytes:
-    return msgpack.packb({"v": 1, "kind": "control", "t": t, "agent": agent, "control": value, "by": "agent",
+    return msgpack.packb({"v": WIRE, "kind": "control", "t": t, "agent": agent, "control": value, "by": "agent",
                           "plan_s": 0.0, "rss_mb": 0.0, **extra}, use_bin_type=True)
 
 
@@ -71,11 +75,12 @@ def probe(a: dict) -> dict:
             co.declare_queryable(f"{root}/snapshot", answer("coordinator")),
             pr.declare_queryable(f"{root}/predictor", answer("predictor")),
             t4.declare_subscriber(f"{root}/turn/4", watch("taxi-4"))]
-    keep += [t0.declare_subscriber(f"{root}/{k}", watch("taxi-0")) for k in ("state", "forecast", "committed/*", "stop", "turn/0")]
-    keep += [t3.declare_queryable(f"{root}/{k}", answer("forged")) for k in ("spec", "snapshot", "predictor")]
+    keep += [t0.declare_subscriber(f"{root}/{k}", watch("taxi-0")) for k in ("state", "forecast/0", "dropoffs", "committed/*", "stop", "turn/0")]
+    keep += [t3.declare_queryable(f"{root}/{k}", answer("forged")) for k in ("spec", "snapshot", "predictor", "forecast/0")]
+    keep.append(co.declare_queryable(f"{root}/forecast/*", answer("coordinator")))
     keep += [t3.liveliness().declare_token(f"{root}/alive/4"), t3.liveliness().declare_token(f"{root}/alive/3")]
     time.sleep(1.0)
-    for k in ("control/4", "committed/0", "committed/3", "state", "forecast", "turn/0", "turn/4", "stop"):
+    for k in ("control/4", "committed/0", "committed/3", "state", "forecast/0", "dropoffs", "turn/0", "turn/4", "stop"):
         t3.put(f"{root}/{k}", f"forged by taxi-3 on {k}".encode())
     others = {n: zenoh.open(config(ep, certs, n)) for n in ("coordinator", "predictor", "taxi-0", "taxi-4")}  # not the observers:
     time.sleep(0.5)  # a session delivers its own puts to itself without the router
@@ -95,7 +100,7 @@ def probe(a: dict) -> dict:
     while not seen.empty():
         got.append(seen.get())
     out["seen"] = got
-    for who, k in (("taxi-0", "spec"), ("taxi-0", "snapshot"), ("coordinator", "predictor"), ("taxi-4", "spec")):
+    for who, k in (("taxi-0", "spec"), ("taxi-0", "snapshot"), ("coordinator", "predictor"), ("taxi-4", "spec"), ("taxi-0", "forecast/0")):
         replies = s[who].get(f"{root}/{k}", timeout=3.0)
         out["answers"][f"{who} {k}"] = sorted(r.ok.payload.to_bytes().decode() for r in replies if r.ok is not None)
     del keep

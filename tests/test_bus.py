@@ -14,7 +14,8 @@ from agents.greedy import greedy_controls
 from bus.delta import StateView, state_message
 from bus.keys import Keys
 from bus.session import DEFAULT_ENDPOINT, DEFAULT_TLS_ENDPOINT, INSECURE_WARNING, SessionArgs, add_session_args, session_args
-from bus.wire import Ack, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
+from bus.wire import (WIRE_VERSION, Ack, Control, Dropoffs, ForecastMsg, ForecastRequest, RunSpec, SectorForecast, Snapshot, State,
+                      Stop, Turn, WireError, decode)
 from city.errors import ConfigError
 from city.sim import FleetSim
 from coordinator.evaluate import episode_requests, initial_positions
@@ -29,8 +30,14 @@ def test_every_message_round_trips_exactly() -> None:
         assert np.array_equal(getattr(back, name), getattr(fc, name)) and getattr(back, name).dtype == np.float64
     assert back.beta.shape == (5, 5) and back.hour == 1
     spec = RunSpec(run="r", scenario="synthetic", data_dir=None, city={"intersections": 9}, taxis=3, minutes=5, policy="surge",
-                   rollout={"horizon": 4, "samples": 10}, deadline_s=2.5)
+                   rollout={"horizon": 4, "samples": 10}, deadline_s=2.5, city_sha256="0" * 64, code="surge 0.1.0+abc")
     assert decode(spec.encode(), RunSpec) == spec
+    piece = SectorForecast(hour=0, sector=2, eta=0.5, nodes=np.array([3, 7], np.int32), rho=np.array([0.25, 0.75]),
+                           delta=np.array([1.0, 0.0]), beta=rng.random(5))
+    back = decode(piece.encode(), SectorForecast)
+    assert back.nodes.dtype == np.int32 and np.array_equal(back.nodes, piece.nodes) and np.array_equal(back.beta, piece.beta)
+    drops = decode(Dropoffs(hour=1, delta=rng.random(40)).encode(), Dropoffs)
+    assert drops.delta.shape == (40,) and drops.hour == 1
     for msg in (Control(t=3, agent=2, control=-1, by="base", plan_s=0.25), Stop(t=9)):
         assert decode(msg.encode(), type(msg)) == msg
     turn = decode(Turn(t=3, agent=2, deps=np.array([0, 1]), controls=np.array([-1, 7])).encode(), Turn)
@@ -46,10 +53,10 @@ def test_every_message_round_trips_exactly() -> None:
         (b"\xc1", "not msgpack"),
         (msgpack.packb([1, 2]), "expected a map"),
         (msgpack.packb({"v": 99, "kind": "turn", "t": 1, "agent": 0}), "wire version 99"),
-        (msgpack.packb({"v": 1, "kind": "stop", "t": 1}), "kind 'stop', expected turn"),
-        (msgpack.packb({"v": 1, "kind": "turn", "t": 1}), "turn has no field 'agent'"),
-        (msgpack.packb({"v": 1, "kind": "turn", "t": "1", "agent": 0}), "field 't' is str, expected int"),
-        (msgpack.packb({"v": 1, "kind": "turn", "t": True, "agent": 0}), "field 't' is bool, expected int"),
+        (msgpack.packb({"v": WIRE_VERSION, "kind": "stop", "t": 1}), "kind 'stop', expected turn"),
+        (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": 1}), "turn has no field 'agent'"),
+        (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": "1", "agent": 0}), "field 't' is str, expected int"),
+        (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": True, "agent": 0}), "field 't' is bool, expected int"),
     ],
 )
 def test_bad_messages_name_the_key_and_field(payload: bytes, message: str) -> None:

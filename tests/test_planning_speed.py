@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.forecast import Forecast
+from city.forecast import Forecast
 from agents.base import make_policy
 from agents.rollout import DemandTables, RolloutConfig, Shortcuts, default_prune, plan_agent, prepare_step
 from agents.waves import plan_waves

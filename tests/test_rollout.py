@@ -11,7 +11,7 @@ import pytest
 
 from agents import _kernels as K
 from agents.base import EpisodeContext, make_policy
-from agents.forecast import Forecast, make_provider
+from agents.forecast import make_provider
 from agents.greedy import greedy_controls
 from agents.ia import ia_controls
 from agents.rollout import (
@@ -26,6 +26,7 @@ from agents.rollout import (
     prepare_step,
 )
 from city.errors import ConfigError
+from city.forecast import Forecast
 from city.graph import City
 from city.sim import PICKUP, FleetSim, Observation, Requests
 from coordinator.evaluate import run_episode

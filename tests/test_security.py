@@ -73,12 +73,14 @@ def test_every_key_has_one_writer_and_the_rules_follow_the_scheme() -> None:
                     granted.setdefault(f"{rule['flows'][0]} {msg} {k}", set()).update(pol["subjects"])
     writes = {"put", "declare_queryable", "reply", "liveliness_token"}
     for channel in SCHEME:
-        keys = [f"surge/r/{channel.name}/{i}" for i in range(4)] if channel.per_agent else [f"surge/r/{channel.name}"]
+        keys = [f"surge/r/{channel.name}/{i}" for i in range(4)] if channel.indexed else [f"surge/r/{channel.name}"]
         for i, k in enumerate(keys):
             writers = {s for g, subjects in granted.items() for s in subjects
                        if g.split()[0] == "ingress" and g.split()[1] in writes and g.split()[2] in (k, k.rsplit("/", 1)[0] + "/*")}
-            expected = {f"taxi-{i}"} if channel.writer == TAXI else {channel.writer}
+            expected = {f"taxi-{i}"} if channel.writer == TAXI else set(channel.writers)
             assert writers == expected, (k, writers)
+    assert {c.name: c.writers for c in SCHEME if len(c.writers) > 1} == {"forecast": ("coordinator", "predictor"),
+                                                                           "dropoffs": ("coordinator", "predictor")}
     mine = {(flow, msgs, k) for flow, msgs, k in grants(TAXI, 3, "r")}
     assert ("ingress", ("put",), "surge/r/control/3") in mine and ("egress", ("put",), "surge/r/turn/3") in mine
     assert not any(k.endswith("/turn/*") and flow == "egress" for flow, _, k in mine)  # a taxi sees only its own turns
@@ -120,7 +122,8 @@ def test_taxi_3s_certificate_can_do_only_what_taxi_3_does(secured: dict) -> None
     assert [s for s in seen if "forged" in s[2] or s[1].endswith("alive/4")] == []
     assert len(seen) == 3
     assert out["answers"] == {"taxi-0 spec": ["coordinator"], "taxi-0 snapshot": ["coordinator"],
-                              "coordinator predictor": ["predictor"], "taxi-4 spec": ["coordinator"]}
+                              "coordinator predictor": ["predictor"], "taxi-4 spec": ["coordinator"],
+                              "taxi-0 forecast/0": ["coordinator"]}
     assert secured["router"].poll() is None
 
 
@@ -194,11 +197,13 @@ def _agent(run: str = "u", me: int = 1):  # noqa: ANN202
     from agents.taxi import AgentConfig, TaxiAgent
     from bus.session import SessionArgs
     from bus.wire import RunSpec
+    from city.fingerprint import city_sha256, code_version
     from city.scenario import load_city
 
     agent = TaxiAgent(AgentConfig(index=me, run=run, bus=SessionArgs(mode="client", connect=["tcp/127.0.0.1:1"])))
     spec = RunSpec(run=run, scenario="synthetic", data_dir=None, city=load_city("synthetic").summary(), taxis=3, minutes=4,
-                   policy="surge", rollout={"samples": 4, "horizon": 2}, deadline_s=5.0)
+                   policy="surge", rollout={"samples": 4, "horizon": 2}, deadline_s=5.0,
+                   city_sha256=city_sha256(load_city("synthetic")), code=code_version())
     agent._accept_spec(spec.encode())
     from bus.checks import Bounds
 
@@ -215,7 +220,9 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
     from agents.rollout import candidate_controls
     from bus.delta import state_message
     from bus.session import Inbox
-    from bus.wire import Control, ForecastMsg, Stop, Turn, WireError, decode
+    from bus.forecasts import sector_message
+    from bus.wire import Control, Dropoffs, Stop, Turn, WireError, decode
+    from city.forecast import Forecast
     from city.sim import Observation
 
     agent, spec = _agent()
@@ -234,8 +241,8 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
     off_map = dataclasses.replace(good, pos=np.array([0, n, 9], dtype=np.int32))
     cands = candidate_controls(agent.city, obs, 0).tolist()
     ok, not_a_move = cands[-1], next(v for v in range(n) if v not in cands)
-    fc = ForecastMsg(hour=0, eta=np.full(agent.city.n_sectors, 0.5), rho=np.ones(n), delta=np.ones(n),
-                     beta=np.ones((agent.city.n_sectors, agent.city.n_sectors)))
+    S = agent.city.n_sectors
+    fc = Forecast(eta=np.full(S, 0.5), rho=np.ones(n), delta=np.ones(n), beta=np.full((S, S), 1.0 / S))
     sent = []
 
     class Out:
@@ -253,10 +260,12 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
         ("turn", k.turn(1), turn(0, [0], [n])),  # a predecessor's control off the map
         ("turn", k.turn(1), turn(0, [0], [-5])),  # the same kind: counted, not logged again
         ("turn", k.turn(1), turn(0, [2], [ok])),  # agent 2 is no predecessor of agent 1
-        ("turn", k.turn(1), turn(2, [], [])),
+        ("turn", k.turn(1), turn(7, [], [])),  # not a minute of the episode
+        ("turn", k.turn(1), turn(2, [], [])),  # ahead of its state: held, then replaced by the turn of minute 0
         ("stop", k.stop, Stop(t=1).encode()),  # not the run's end: the agent stays
-        ("forecast", k.forecast, b"\x93\x01\x02"),
-        ("forecast", k.forecast, fc.encode()),
+        ("forecast", k.forecast(0), b"\x93\x01\x02"),
+        *[("forecast", k.forecast(s), sector_message(fc, agent.city, 0, s).encode()) for s in range(S)],
+        ("dropoffs", k.dropoffs, Dropoffs(hour=0, delta=fc.delta).encode()),
         ("turn", k.turn(1), turn(0, [0], [not_a_move])),  # checked when the agent plans: dropped, no control sent
         ("turn", k.turn(1), turn(0, [0], [ok])),
         ("stop", k.stop, Stop(t=4).encode()),
@@ -267,7 +276,8 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
     for reason in ("field 'pos' has 2 taxis, the run has 3", f"field 'pos' holds {n}, outside 0..{n - 1}",
                    f"turn/1: field 'controls' holds {n}, outside -1..{n - 1}",
                    f"control {not_a_move} of agent 0 is not one of its controls",
-                   "turn/1: field 't' is 2, the current minute is 0", "field 't' is 1, the run ends after minute 4", "forecast"):
+                   "turn/1: field 't' is 7, outside the episode's minutes 0..3", "field 't' is 1, the run ends after minute 4",
+                   "forecast"):
         assert reason in err, reason
     assert "holds -5" not in err and "'deps'" not in err  # the same kind as the first: counted, not logged again
     assert agent.rejected.counts["turn: surge/u/turn/N: field Q holds N, outside N.N"] == 3
@@ -294,7 +304,7 @@ def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> 
     assert coord._handle(("alive", k.alive(7), True), want) is None and coord.health.alive == set()
 
     class Gone:
-        def reply(self, *_):  # noqa: ANN002
+        def reply(self, *_, **__):  # noqa: ANN002, ANN003
             raise RuntimeError("the querier left")
 
         def drop(self) -> None:
