@@ -22,7 +22,8 @@ def add_parser(subparsers) -> None:
     t.add_argument("--hidden", type=_widths, default=None, help="hidden widths of the standard and no-event networks, e.g. 256,256 (the paper's default)")
     t.add_argument("--event-hidden", type=_widths, default=None, help="hidden widths of the event-sector networks, e.g. 4096,4096 (the paper's default)")
     t.add_argument("--window", type=_window, default=None,
-                   help="hours before an event's start and after its end in which it counts for its sector, LEAD,LAG (default 2,1)")
+                   help="hours before an event's start and after its end in which it counts for its sector, LEAD,LAG (default 0,0, "
+                        "chosen on the validation months)")
     t.add_argument("--no-ablation", action="store_true", help="train only the system's networks (skip the metadata and shuffled-text networks)")
     t.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help="embedding and training device (auto: CUDA where present)")
     t.add_argument("--encoder", default=None, help="sentence-transformers model name or path (default: bundled all-MiniLM-L6-v2)")
