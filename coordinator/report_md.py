@@ -147,8 +147,15 @@ def _provenance(scen) -> list[str]:
     lines = [f"- Street graph: `{city.name}`, {city.n_nodes} intersections, {city.n_edges} streets, {city.n_sectors} sectors"
              + (" (real map from the data directory)" if city.name != "synthetic" else " (synthetic, embedded in the package)") + "."]
     if kind == "SyntheticWorld":
-        lines.append("- Demand, requests, events, event texts, weather and points of interest: **synthetic** (the package's demand world, "
-                     f"world seed {world.seed}); nothing in it is computed from the routing outcomes.")
+        notes = list(getattr(world, "notes", None) or [])
+        real_base = world.base_source.startswith("zone profile")
+        lines += [f"- Events, their texts and attendance, and every request: **synthetic** (the package's demand world, world seed "
+                  f"{world.seed}); nothing in it is computed from the routing outcomes.",
+                  f"- Base demand: {'**real** trip counts' if real_base else '**synthetic**, shaped by the real hourly profile'}: "
+                  f"{world.base_source}.",
+                  "- Weather: " + ("**synthetic**" if any(n.startswith("weather:") for n in notes) else f"**real** ({world.weather.source})") + ".",
+                  "- Points of interest: " + ("**synthetic**" if any(n.startswith("points of interest:") for n in notes)
+                                              else f"**real** ({len(world.pois.kind)} from the data directory)") + "."]
     else:
         lines.append(f"- Demand world: `{kind}`; see its notes below for which inputs are real.")
     for note in getattr(world, "notes", None) or []:
