@@ -147,8 +147,15 @@ def _provenance(scen) -> list[str]:
     lines = [f"- Street graph: `{city.name}`, {city.n_nodes} intersections, {city.n_edges} streets, {city.n_sectors} sectors"
              + (" (real map from the data directory)" if city.name != "synthetic" else " (synthetic, embedded in the package)") + "."]
     if kind == "SyntheticWorld":
-        lines.append("- Demand, requests, events, event texts, weather and points of interest: **synthetic** (the package's demand world, "
-                     f"world seed {world.seed}); nothing in it is computed from the routing outcomes.")
+        notes = list(getattr(world, "notes", None) or [])
+        real_base = world.base_source.startswith("zone profile")
+        lines += [f"- Events, their texts and attendance, and every request: **synthetic** (the package's demand world, world seed "
+                  f"{world.seed}); nothing in it is computed from the routing outcomes.",
+                  f"- Base demand: {'**real** trip counts' if real_base else '**synthetic**, shaped by the real hourly profile'}: "
+                  f"{world.base_source}.",
+                  "- Weather: " + ("**synthetic**" if any(n.startswith("weather:") for n in notes) else f"**real** ({world.weather.source})") + ".",
+                  "- Points of interest: " + ("**synthetic**" if any(n.startswith("points of interest:") for n in notes)
+                                              else f"**real** ({len(world.pois.kind)} from the data directory)") + "."]
     else:
         lines.append(f"- Demand world: `{kind}`; see its notes below for which inputs are real.")
     for note in getattr(world, "notes", None) or []:
@@ -251,8 +258,9 @@ def write_report(run, scen, docs: dict, pe: dict | None) -> Path:
                           f"{100 * r['pe_previous_hour']:.1f} %", str(r["n"])] for r in pe["rows"]])
     lines += ["", "## The 7 pm surge", "", f"![surge map]({figs['map']})", "", f"![surge vs greedy]({figs['gif']})", "",
               "## Data provenance", ""] + _provenance(scen)
-    lines += ["", "## Wall time of this invocation (shared machine)", ""]
-    lines += [f"- {k}: {v:.0f} s" for k, v in run.timings.items()]
+    lines += ["", "## Wall time (this machine; a resumed step costs little the second time)", "",
+              "| step | this invocation | every invocation on this directory |", "|---|---|---|"]
+    lines += [f"| {k} | {run.timings.get(k, 0.0):.0f} s | {v:.0f} s |" for k, v in run.summed().items()]
     path = out / "REPORT.md"
     path.write_text("\n".join(lines) + "\n")
     return path

@@ -91,10 +91,16 @@ class Run:
     command: str | None = None
     log: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    #: Each step's seconds summed over the earlier invocations on this ``out`` (a resumed step costs little the second time).
+    earlier: dict[str, float] = field(default_factory=dict)
 
     def say(self, msg: str) -> None:
         print(f"reproduce: {msg}", file=sys.stderr, flush=True)
         self.log.append(msg)
+
+    def summed(self) -> dict[str, float]:
+        """Each step's seconds over every invocation on ``out``, this one included."""
+        return {k: self.earlier.get(k, 0.0) + self.timings.get(k, 0.0) for k in dict.fromkeys([*self.earlier, *self.timings])}
 
     @property
     def model(self) -> Path:
@@ -215,6 +221,9 @@ def reproduce(run: Run) -> Path:
     from coordinator import report_md
 
     run.out.mkdir(parents=True, exist_ok=True)
+    timings = run.out / "timings.json"
+    if timings.exists():
+        run.earlier = json.loads(timings.read_text()).get("all invocations", {})
     p = run.protocol
     t_all = time.perf_counter()
     _train(run)
@@ -230,9 +239,9 @@ def reproduce(run: Run) -> Path:
     t0 = time.perf_counter()
     report = report_md.write_report(run, scen, docs, pe)
     run.timings["report"] = time.perf_counter() - t0
-    run.timings["total (this invocation)"] = time.perf_counter() - t_all
-    (run.out / "timings.json").write_text(json.dumps(run.timings, indent=1))
-    run.say(f"wrote {report} in {run.timings['total (this invocation)']:.0f} s")
+    run.timings["total"] = time.perf_counter() - t_all
+    timings.write_text(json.dumps({"this invocation": run.timings, "all invocations": run.summed()}, indent=1))
+    run.say(f"wrote {report} in {run.timings['total']:.0f} s")
     return report
 
 

@@ -21,6 +21,9 @@ def add_parser(subparsers) -> None:
     t.add_argument("--patience", type=int, default=10, help="stop a network this many epochs after its best validation loss (0: run the whole cap, keep the best epoch)")
     t.add_argument("--hidden", type=_widths, default=None, help="hidden widths of the standard and no-event networks, e.g. 256,256 (the paper's default)")
     t.add_argument("--event-hidden", type=_widths, default=None, help="hidden widths of the event-sector networks, e.g. 4096,4096 (the paper's default)")
+    t.add_argument("--window", type=_window, default=None,
+                   help="hours before an event's start and after its end in which it counts for its sector, LEAD,LAG (default 0,0, "
+                        "chosen on the validation months)")
     t.add_argument("--no-ablation", action="store_true", help="train only the system's networks (skip the metadata and shuffled-text networks)")
     t.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help="embedding and training device (auto: CUDA where present)")
     t.add_argument("--encoder", default=None, help="sentence-transformers model name or path (default: bundled all-MiniLM-L6-v2)")
@@ -79,9 +82,22 @@ def _widths(text: str) -> tuple[int, ...]:
     return out
 
 
+def _window(text: str) -> tuple[int, int]:
+    import argparse
+
+    parts = text.split(",")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise argparse.ArgumentTypeError(f"{text!r} is not LEAD,LAG (two whole numbers of hours, e.g. 2,1)")
+    lead, lag = (int(p) for p in parts)
+    if lead > 6 or lag > 6:
+        raise argparse.ArgumentTypeError(f"{text!r}: lead and lag are at most 6 hours")
+    return lead, lag
+
+
 # ---------------------------------------------------------------- handlers
 def train_main(args) -> int:
     from predictor.inputs import load_world, record_inputs
+    from predictor.features import LAG_HOURS, LEAD_HOURS
     from predictor.model import train_model
     from predictor.nets import EVENT_HIDDEN, STANDARD_HIDDEN
     from predictor.train import TrainConfig, log_line
@@ -104,6 +120,7 @@ def train_main(args) -> int:
     Path(args.out).mkdir(parents=True, exist_ok=True)
     inputs = record_inputs(args.out, events=args.events, reviews=args.reviews, trips=args.trips)
     cfg = TrainConfig(epochs=args.epochs, seed=args.seed, patience=args.patience, device=args.device)
+    lead, lag = args.window or (LEAD_HOURS, LAG_HOURS)
     train_model(
         world,
         args.out,
@@ -116,6 +133,8 @@ def train_main(args) -> int:
         standard_hidden=args.hidden or STANDARD_HIDDEN,
         event_hidden=args.event_hidden or EVENT_HIDDEN,
         event_epochs=args.event_epochs,
+        lead_hours=lead,
+        lag_hours=lag,
         ablation=not args.no_ablation,
         log=log_line,
     )

@@ -21,16 +21,15 @@ hour, then the mean of their stacked review-cluster means R_w (events without
 reviews are left out of the R average; if none has reviews R̂_s is zero).
 
 Which events count for an hour: the paper says "events happening on sector
-s".  Taken literally (the event overlaps ``[h, h+1h)``), that misses most of
-an event's taxi demand, which comes *before* the start (arrivals) and *after*
-the end (departures): on the synthetic world the literal rule covers only 16 %
-of the surge trips at 17 h and 49 % at 19 h.  surge therefore counts an event
-in its venue's sector for every hour that overlaps
-``[start - LEAD_HOURS, end + LAG_HOURS)`` (2 h and 1 h by default, recorded in
-the model), which covers 76–92 % of the surge at 15–21 h.  (These shares
-were measured on the whole year of the earlier synthetic world, before the
-validation split existed; a new choice of window must be made on the
-validation months, ``surge predictor eval --part val``.)  Adjacent sectors
+s": the event overlaps ``[h, h+1h)``.  surge counts an event in its venue's
+sector for every hour that overlaps ``[start - LEAD_HOURS, end + LAG_HOURS)``
+(recorded in the model; ``surge predictor train --window LEAD,LAG``).  The
+default, 0 and 0, is the paper's literal rule, chosen on the validation
+months: of the windows 0,0, 1,0, 2,1 and 3,2 it gave the system the lowest
+percent error on every sector-hour of July–August, 15–21 h (BENCHMARKS,
+"Event window").  A wider window covers more of an event's taxi demand
+(arrivals come before the start, departures after the end) but makes the
+event network predict many more sector-hours, and it predicts them worse.  Adjacent sectors
 (where many arrivals are picked up) are not included: that would make 60 % of
 evening sector-hours "event" hours and quadruple the event network's
 training set.  Each of
@@ -260,8 +259,8 @@ class MetadataFeaturizer:
 
 
 #: Hours before an event's start and after its end in which it counts for its sector (see module notes).
-LEAD_HOURS = 2
-LAG_HOURS = 1
+LEAD_HOURS = 0
+LAG_HOURS = 0
 
 
 def active_hours(ev, year: int, n_hours: int, lead: int = 0, lag: int = 0) -> range:

@@ -176,7 +176,9 @@ def trained(world: TinyWorld, cache: Path, tmp_path_factory) -> Path:
     from predictor.train import TrainConfig
 
     out = tmp_path_factory.mktemp("model")
-    train_model(world, out, cfg=TrainConfig(epochs=2, lr=1e-3, seed=0, device="auto"), cache_dir=str(cache), standard_hidden=(32, 32), event_hidden=(64, 64), scenario={"name": "tiny"}, beta_days=3, log=None)
+    # A window of 2 h before and 1 h after puts the tiny world's 18-20 h events on five of the hours 15-21.
+    train_model(world, out, cfg=TrainConfig(epochs=2, lr=1e-3, seed=0, device="auto"), cache_dir=str(cache), standard_hidden=(32, 32),
+                event_hidden=(64, 64), scenario={"name": "tiny"}, beta_days=3, lead_hours=2, lag_hours=1, log=None)
     return out
 
 
@@ -225,7 +227,8 @@ def test_ablation_rows_and_intervals(world: TinyWorld, trained: Path, cache: Pat
 
     model = DemandModel.load(trained)
     assert set(model.meta["networks"]) == {"standard", "no_event", "event", "metadata", "event_shuffled"}
-    data = build_year_data(world, model.featurizer(str(cache)))
+    lead, lag = model.window
+    data = build_year_data(world, model.featurizer(str(cache)), lead=lead, lag=lag)
     res = evaluate(model, data, n_boot=300, seed=1)
     assert res["schema"] == "surge.predictor.eval/1" and res["predictors"] == [k for k, _ in ROWS]
     S = data.n_sectors

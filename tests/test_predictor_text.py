@@ -86,7 +86,7 @@ def _text_gain(planted: bool, tmp_path) -> dict:
     from predictor.train import TrainConfig
 
     world = TextSignalWorld(planted)
-    data = build_year_data(world, EventFeaturizer(Embedder(None)))
+    data = build_year_data(world, EventFeaturizer(Embedder(None)), lead=2, lag=1)  # the surge's 17-21 h around the 19-21 h show
     # The standard and no-event networks do not enter event sector-hours: one epoch is enough for them.
     cfg = TrainConfig(epochs=1, lr=3e-3, batch_size=64, seed=0, patience=15)
     model = train_model(world, tmp_path, cfg=cfg, standard_hidden=(16, 16), event_hidden=(64, 64), event_epochs=150, scenario={"name": "tiny"}, beta_days=2, log=None, data=data)
