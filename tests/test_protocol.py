@@ -7,10 +7,14 @@ project.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import subprocess
 import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +30,34 @@ from bus.wire import Dropoffs, WireError
 from city.fingerprint import city_sha256
 from city.scenario import load_city
 from tests.test_planning_speed import forecast, seeded_state
+
+
+@contextlib.contextmanager
+def _answering(session, key: str, answer: Callable[[str], bytes], asked: list[str] | None = None) -> Iterator[None]:  # noqa: ANN001
+    """A stand-in coordinator: a queryable on ``key`` that answers each query with ``answer(its key)``, from a thread."""
+    import zenoh
+
+    answers = session.declare_queryable(key, zenoh.handlers.FifoChannel(64))
+    done = threading.Event()
+
+    def serve() -> None:
+        while not done.is_set():
+            if (query := answers.try_recv()) is None:
+                time.sleep(0.01)
+                continue
+            if asked is not None:
+                asked.append(str(query.key_expr))
+            query.reply(query.key_expr, answer(str(query.key_expr)))
+            query.drop()
+
+    thread = threading.Thread(target=serve)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join(5)
+        answers.undeclare()
 
 
 def _pieces(city, fc, config: RolloutConfig, sectors) -> AgentForecasts:  # noqa: ANN001
@@ -159,33 +191,14 @@ def test_an_outside_client_follows_a_run_and_rebuilds_every_taxis_position(tmp_p
 
 def test_a_taxi_follows_its_sectors_and_fetches_what_it_missed_when_it_moves() -> None:
     """A real zenoh session: the taxi's subscriptions follow its sectors; a stand-in coordinator answers the sector queries."""
-    import threading
-    import time
-
-    import zenoh
-
     from bus.session import Inbox, SessionArgs, open_session
 
     city = load_city("synthetic")
     fc = forecast(city, np.random.default_rng(3))
     keys = Keys("follow")
     asked: list[str] = []
-    with open_session(SessionArgs(mode="peer")) as session:
-        answers = session.declare_queryable(keys.all_forecasts, zenoh.handlers.FifoChannel(64))
-
-        done = threading.Event()
-
-        def coordinator() -> None:
-            while not done.is_set():
-                if (query := answers.try_recv()) is None:
-                    time.sleep(0.01)
-                    continue
-                asked.append(str(query.key_expr))
-                query.reply(query.key_expr, sector_message(fc, city, 0, Keys.agent_of(str(query.key_expr))).encode())
-                query.drop()
-
-        answering = threading.Thread(target=coordinator)
-        answering.start()
+    with (open_session(SessionArgs(mode="peer")) as session,
+          _answering(session, keys.all_forecasts, lambda k: sector_message(fc, city, 0, Keys.agent_of(k)).encode(), asked)):
         inbox = Inbox()
         store = _pieces(city, fc, RolloutConfig(), [])
         store.attach(session, inbox, keys)
@@ -198,9 +211,6 @@ def test_a_taxi_follows_its_sectors_and_fetches_what_it_missed_when_it_moves() -
         got = sorted(Keys.agent_of(item[1]) for item in iter(lambda: inbox.get(timeout=1.0), None))
         assert got == [2, 3]
         store.close()
-        done.set()
-        answering.join(5)
-        answers.undeclare()
 
 
 def test_imports_run_one_way() -> None:
@@ -231,11 +241,6 @@ def test_imports_run_one_way() -> None:
 
 def test_an_agent_on_another_city_refuses_to_join_at_once(capsys: pytest.CaptureFixture) -> None:
     """A real session answers ``spec`` with another city's hash: the agent exits with one line, not after its join timeout."""
-    import threading
-    import time
-
-    import zenoh
-
     from agents.taxi import AgentConfig, agent_main
     from bus.router import free_tcp_port
     from bus.session import SessionArgs, open_session
@@ -246,27 +251,9 @@ def test_an_agent_on_another_city_refuses_to_join_at_once(capsys: pytest.Capture
     keys = Keys("refuse")
     spec = RunSpec(run="refuse", scenario="synthetic", data_dir=None, city=city.summary(), taxis=1, minutes=2, policy="surge",
                    rollout={"samples": 4}, deadline_s=5.0, city_sha256="f" * 64, code="surge 0.0.0+000000000000")
-    with open_session(SessionArgs(mode="peer", listen=[endpoint])) as session:
-        answers = session.declare_queryable(keys.spec, zenoh.handlers.FifoChannel(16))
-        done = threading.Event()
-
-        def coordinator() -> None:
-            while not done.is_set():
-                if (query := answers.try_recv()) is None:
-                    time.sleep(0.01)
-                    continue
-                query.reply(keys.spec, spec.encode())
-                query.drop()
-
-        answering = threading.Thread(target=coordinator)
-        answering.start()
+    with open_session(SessionArgs(mode="peer", listen=[endpoint])) as session, _answering(session, keys.spec, lambda _: spec.encode()):
         t0 = time.monotonic()
-        try:
-            code = agent_main(AgentConfig(index=0, run="refuse", bus=SessionArgs(mode="peer", connect=[endpoint]), join_timeout_s=120))
-        finally:
-            done.set()
-            answering.join(5)
-            answers.undeclare()
+        code = agent_main(AgentConfig(index=0, run="refuse", bus=SessionArgs(mode="peer", connect=[endpoint]), join_timeout_s=120))
     assert code == 2 and time.monotonic() - t0 < 60
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith(f"surge agent 0: error: agent 0 does not join run 'refuse': this host's synthetic city has content hash "
