@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from city.graph import City
+from city.sim import Requests
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -53,7 +54,7 @@ def grid_edges(side: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 class ListedWorld:
     """The stand-in worlds' common reading side: hourly counts, true rates and events held in lists.
 
-    Subclasses set ``year``, ``events``, ``_rate`` and ``_counts`` and draw their own requests.
+    Subclasses set ``city``, ``year``, ``events``, ``_rate`` and ``_counts``; requests are the realised counts spread uniformly.
     They keep the default calendar: US federal holidays and the built-in occupancy schedules.
     """
 
@@ -71,6 +72,15 @@ class ListedWorld:
 
     def events_active(self, when: dt.datetime) -> list:
         return [ev for ev in self.events if ev.active(when)]
+
+    def requests(self, date: dt.date, hour: int, minutes: int = 60) -> Requests:
+        """The hour's realised count, spread uniformly over the map and the minutes (seeded by the hour)."""
+        h = self.hour_index(dt.datetime.combine(date, dt.time(hour)))
+        rng = np.random.default_rng(h)
+        n = int(self._counts[h].sum() * minutes / 60)
+        pick = rng.integers(0, self.city.n_nodes, n)
+        drop = rng.integers(0, self.city.n_nodes, n)
+        return Requests.sorted(pick, drop, rng.integers(0, minutes, n))
 
 
 @pytest.fixture

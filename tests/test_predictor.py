@@ -13,7 +13,6 @@ import pytest
 
 from city.events import Event
 from city.graph import City
-from city.sim import Requests
 from city.weather import HourlyWeather, hours_in_year
 from tests.conftest import ListedWorld, grid_edges
 
@@ -61,14 +60,6 @@ class TinyWorld(ListedWorld):
             rate[h0 : h0 + 2, 0] *= 3.0 if big else 1.1
         self._rate = rate
         self._counts = rng.poisson(rate)
-
-    def requests(self, date: dt.date, hour: int, minutes: int = 60) -> Requests:
-        h = self.hour_index(dt.datetime.combine(date, dt.time(hour)))
-        rng = np.random.default_rng(h)
-        n = int(self._counts[h].sum() * minutes / 60)
-        pick = rng.integers(0, self.city.n_nodes, n)
-        drop = rng.integers(0, self.city.n_nodes, n)
-        return Requests.sorted(pick, drop, rng.integers(0, minutes, n))
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,6 @@ import pytest
 
 from city.events import Event, Venue
 from city.graph import City
-from city.sim import Requests
 from city.weather import HourlyWeather, hours_in_year
 from tests.conftest import ListedWorld, grid_edges
 
@@ -68,12 +67,6 @@ class TextSignalWorld(ListedWorld):
             rate[h0 : h0 + 5, 0] *= 3.0 if big else 1.2
         self._rate = rate
         self._counts = rng.poisson(rate)
-
-    def requests(self, date: dt.date, hour: int, minutes: int = 60) -> Requests:
-        h = self.hour_index(dt.datetime.combine(date, dt.time(hour)))
-        rng = np.random.default_rng(h)
-        n = int(self._counts[h].sum() * minutes / 60)
-        return Requests.sorted(rng.integers(0, self.city.n_nodes, n), rng.integers(0, self.city.n_nodes, n), rng.integers(0, minutes, n))
 
 
 def _text_gain(planted: bool, tmp_path) -> dict:
