@@ -35,12 +35,38 @@ if TYPE_CHECKING:
 
 
 class SyntheticWorld(DemandWorld):
-    """A seeded synthetic year of demand on any map; build it with :func:`synthetic_world`.
+    """A seeded synthetic year of demand on any map; the same arguments always give the same world.
 
     Extra attributes: ``anchors`` (sector of the theatre district, arena,
     convention centre and festival park), ``intensity`` (each sector's share
     of base demand), ``demand_scale``, ``share`` (of a zone profile's real
     counts) and ``base_source``.
+
+    Parameters
+    ----------
+    city : City
+        The synthetic map or a real one.  Anchors for the theatre district,
+        arena, convention centre and festival park come from
+        ``city.info["anchors"]`` or, on a real map, from sector names (see
+        :func:`find_anchors`).
+    year, seed : int
+    weather : HourlyWeather, optional
+        Real hourly weather for ``year``; seeded synthetic weather otherwise.
+    pois : Pois, optional
+        Real points of interest in the city's coordinates; synthetic ones otherwise.
+    demand_scale : float
+        Multiplies all demand (base and surges); 1.0 is calibrated for 100 taxis.
+    zone_profile : ZoneProfile, optional
+        Real zone-to-zone trip rates (:func:`city.trips.read_zone_profile`) for the base demand and β.
+    share : float
+        The fleet's share of the real market (default :data:`~city.demand.profile.FLEET_SHARE`, ≈ 1.7 %):
+        it scales the zone profile's trips, or the real profile's 19 h level on a map without one,
+        and the event-goers' trips.
+    holidays : (country, subdivision)
+        Whose public holidays run on a Sunday profile (the ``holidays`` package); US federal by default.
+    schedules : dict, optional
+        Occupancy schedules (:func:`city.occupancy.read_occupancy_csv`) for the assignment of
+        requests to intersections; the built-in DOE ones otherwise.
     """
 
     def __init__(
@@ -244,45 +270,5 @@ class SyntheticWorld(DemandWorld):
         return np.where(rows > 0, flow / np.where(rows > 0, rows, 1.0), 1.0 / self.city.n_sectors)
 
 
-def synthetic_world(
-    city: City,
-    year: int = 2022,
-    seed: int = 0,
-    weather: HourlyWeather | None = None,
-    pois: Pois | None = None,
-    demand_scale: float = 1.0,
-    zone_profile: "ZoneProfile | None" = None,
-    share: float = FLEET_SHARE,
-    holidays: tuple[str, str | None] = (HOLIDAY_COUNTRY, None),
-    schedules: dict | None = None,
-) -> SyntheticWorld:
-    """Generate a year of demand on ``city``; the same arguments always give the same world.
-
-    Parameters
-    ----------
-    city : City
-        The synthetic map or a real one.  Anchors for the theatre district,
-        arena, convention centre and festival park come from
-        ``city.info["anchors"]`` or, on a real map, from sector names (see
-        :func:`find_anchors`).
-    year, seed : int
-    weather : HourlyWeather, optional
-        Real hourly weather for ``year``; seeded synthetic weather otherwise.
-    pois : Pois, optional
-        Real points of interest in the city's coordinates; synthetic ones otherwise.
-    demand_scale : float
-        Multiplies all demand (base and surges); 1.0 is calibrated for 100 taxis.
-    zone_profile : ZoneProfile, optional
-        Real zone-to-zone trip rates (:func:`city.trips.read_zone_profile`) for the base demand and β.
-    share : float
-        The fleet's share of the real market (default :data:`~city.demand.profile.FLEET_SHARE`, ≈ 1.7 %):
-        it scales the zone profile's trips, or the real profile's 19 h level on a map without one,
-        and the event-goers' trips.
-    holidays : (country, subdivision)
-        Whose public holidays run on a Sunday profile (the ``holidays`` package); US federal by default.
-    schedules : dict, optional
-        Occupancy schedules (:func:`city.occupancy.read_occupancy_csv`) for the assignment of
-        requests to intersections; the built-in DOE ones otherwise.
-    """
-    return SyntheticWorld(city, year=year, seed=seed, weather=weather, pois=pois, demand_scale=demand_scale, zone_profile=zone_profile,
-                          share=share, holidays=holidays, schedules=schedules)
+#: The world's usual name in calling code: one signature, the class's.
+synthetic_world = SyntheticWorld
