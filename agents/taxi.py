@@ -73,6 +73,9 @@ class CoordinatorGone(SurgeError):
 
 #: Seconds a turn may wait for its minute's state before the agent takes a snapshot.
 STALL_S = 1.0
+#: Seconds the coordinator's token must stay gone before the agent says so: at a normal end the token
+#: may vanish a moment before the run's ``Stop`` arrives (they travel on different paths).
+GONE_NOTICE_S = 1.0
 
 
 def log(index: int, message: str) -> None:
@@ -104,6 +107,8 @@ class TaxiAgent:
         #: Since when the coordinator's token is missing (monotonic seconds; ``None``: present, or not watched).
         self.coordinator_gone: float | None = None
         self.coordinator_seen = False
+        #: Whether the coordinator's current absence has been logged.
+        self.gone_logged = False
         #: Since when the pending turn waits for its state.
         self.stalled: float | None = None
 
@@ -272,8 +277,7 @@ class TaxiAgent:
             return
         if not present:
             if self.coordinator_gone is None:
-                self.coordinator_gone = time.monotonic()
-                log(self.me, f"the coordinator's token is gone; waiting up to {self.cfg.grace_s:g} s for it to return")
+                self.coordinator_gone, self.gone_logged = time.monotonic(), False
             return
         was_gone, self.coordinator_gone = self.coordinator_gone, None
         if was_gone is not None and self.view.obs is not None:
@@ -283,6 +287,10 @@ class TaxiAgent:
     def _check_health(self, session) -> None:  # noqa: ANN001
         """Leave when the coordinator is gone past the grace period; take a snapshot when a turn is stuck on something lost."""
         now = time.monotonic()
+        if self.coordinator_seen and self.coordinator_gone is not None and not self.gone_logged \
+                and now - self.coordinator_gone > GONE_NOTICE_S:
+            self.gone_logged = True
+            log(self.me, f"the coordinator's token is gone; waiting up to {self.cfg.grace_s:g} s in all for it to return")
         if self.coordinator_gone is not None and now - self.coordinator_gone > self.cfg.grace_s:
             raise CoordinatorGone(f"the coordinator of run {self.cfg.run!r} has been gone for more than {self.cfg.grace_s:g} s "
                                   f"(the grace period); leaving")

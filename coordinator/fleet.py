@@ -53,14 +53,14 @@ def _agent_entry(index: int, run: str, bus: SessionArgs, join_timeout_s: float, 
                                     grace_s=grace_s)))
 
 
-def _coordinator_entry(cfg: FleetConfig, bus: SessionArgs, result_path: str) -> None:
+def _coordinator_entry(cfg: FleetConfig, bus: SessionArgs, result_path: str, run_dir: str | None = None, resume: bool = False) -> None:
     import signal
 
     from coordinator.runtime import coordinator_main
 
     signal.signal(signal.SIGTERM, lambda signum, _: sys.exit(128 + signum))  # unwinds, so the run's stop goes out
     try:
-        coordinator_main(cfg, bus, result_path)
+        coordinator_main(cfg, bus, result_path, run_dir=run_dir, resume=resume)
     except SurgeError as exc:
         print(f"surge coordinator: error: {exc}", file=sys.stderr, flush=True)
         sys.exit(2)
@@ -79,14 +79,17 @@ def in_process(cfg: FleetConfig) -> dict:
 
 
 def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None = None, startup_timeout_s: float = 60.0,
-                    watch: Callable[[list[int]], None] | None = None) -> dict:
+                    watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None,
+                    resume: bool = False) -> dict:
     """Run ``cfg`` as real processes over a loopback router; the coordinator's result.
 
     ``secure`` runs the bus with mutual TLS and access control, with the
     credentials in ``certs`` or, by default, new ones made in the run's
     temporary directory.  ``watch`` is called with the agents' process ids
     about once a second while the coordinator runs (a benchmark samples
-    their memory).
+    their memory).  The coordinator checkpoints each minute to ``run_dir``;
+    ``resume`` continues the run checkpointed there, with a new router and
+    new agents (they hold nothing a snapshot does not give them).
     """
     from agents.rollout import warm_up
 
@@ -97,11 +100,11 @@ def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None 
             make_certs(certs, cfg.taxis)
         elif secure and fleet_size(certs) < cfg.taxis:
             raise ConfigError(f"--certs {certs}: credentials for {fleet_size(certs)} taxis, the run has {cfg.taxis}")
-        return _launch(cfg, certs if secure else None, str(Path(tmp) / "result.json"), startup_timeout_s, watch)
+        return _launch(cfg, certs if secure else None, str(Path(tmp) / "result.json"), startup_timeout_s, watch, run_dir, resume)
 
 
 def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeout_s: float,
-            watch: Callable[[list[int]], None] | None = None) -> dict:
+            watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None, resume: bool = False) -> dict:
     ctx = mp.get_context("spawn")
     port = free_tcp_port()
     endpoint = f"{'tcp' if certs is None else 'tls'}/127.0.0.1:{port}"
@@ -120,7 +123,7 @@ def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeo
                                 forecast=cfg.forecast_name(), model=cfg.options.get("model"))
             procs.append(ctx.Process(target=serve_main, args=(serve, client.as_identity("predictor")), name="surge-predictor"))
             procs[-1].start()
-        coord = ctx.Process(target=_coordinator_entry, args=(cfg, client.as_identity("coordinator"), result_path),
+        coord = ctx.Process(target=_coordinator_entry, args=(cfg, client.as_identity("coordinator"), result_path, run_dir, resume),
                             name="surge-coordinator")
         coord.start()
         procs.append(coord)
@@ -179,6 +182,15 @@ def _fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  #
     p.add_argument("--json", default=None, help="write the run's result here")
 
 
+def _checkpoint_args(p, verb: str) -> None:  # noqa: ANN001
+    p.add_argument("--run-dir", default=None, metavar="DIR",
+                   help="checkpoint the run here after each minute, so that `--resume DIR` can continue it "
+                        "(default: runs/<run> in surge's cache, $SURGE_CACHE or ~/.cache/surge)")
+    extra = "; a new router and new agents start" if verb == "fleet" else ""
+    p.add_argument("--resume", default=None, metavar="RUN_DIR",
+                   help=f"continue the run checkpointed in RUN_DIR (its settings come from the checkpoint; the bus flags apply{extra})")
+
+
 def _grace_arg(p) -> None:  # noqa: ANN001
     p.add_argument("--grace", type=float, default=30.0,
                    help="seconds an agent waits for a vanished coordinator (a restart, `--resume`) before it leaves")
@@ -223,10 +235,25 @@ def _print_result(result: dict, path: str | None) -> None:
         print(f"wrote {path}")
 
 
+def _run_dir(args, verb: str) -> tuple[FleetConfig, str]:  # noqa: ANN001
+    """The run's config and checkpoint directory: from the checkpoint with ``--resume``, else from the flags."""
+    from coordinator.runtime import log
+
+    if args.resume is not None:
+        cfg, run_dir = resumed_config(args.resume), args.resume
+    else:
+        from city.scenario import cache_dir
+
+        cfg = fleet_config(args)
+        run_dir = args.run_dir or str(cache_dir() / "runs" / cfg.run)
+    log(f"checkpointing each minute to {run_dir}; `surge {verb} --resume {run_dir}` continues the run")
+    return cfg, run_dir
+
+
 def cmd_fleet(args) -> int:  # noqa: ANN001
     from bus.session import warn_insecure
 
-    cfg = fleet_config(args)
+    cfg, run_dir = _run_dir(args, "fleet")
     if args.certs is not None and args.insecure:
         raise ConfigError("--certs and --insecure: choose one")
     roles = "a router, a predictor service, a coordinator" if cfg.predictor else "a router, a coordinator"
@@ -237,7 +264,7 @@ def cmd_fleet(args) -> int:  # noqa: ANN001
         how = (f"secured: mutual TLS and access control, with the credentials in {args.certs}" if args.certs else
                "secured: mutual TLS and access control, with credentials made for this run")
     print(f"starting {roles} and {cfg.taxis} agent processes on loopback, {how}", file=sys.stderr, flush=True)
-    result = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs)
+    result = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs, run_dir=run_dir, resume=args.resume is not None)
     if args.check:
         print("running the same instance in-process to compare decisions", file=sys.stderr, flush=True)
         ref = in_process(cfg)
@@ -277,17 +304,10 @@ def _nested(overrides: dict) -> dict:
 
 def cmd_coordinator(args) -> int:  # noqa: ANN001
     from bus.session import session_args
-    from coordinator.runtime import coordinator_main, log
+    from coordinator.runtime import coordinator_main
 
-    if args.resume is not None:
-        cfg, run_dir = resumed_config(args.resume), args.resume
-    else:
-        from city.scenario import cache_dir
-
-        cfg = fleet_config(args)
-        run_dir = args.run_dir or str(cache_dir() / "runs" / cfg.run)
+    cfg, run_dir = _run_dir(args, "coordinator")
     bus = session_args(args, identity="coordinator")
-    log(f"checkpointing each minute to {run_dir}; `surge coordinator --resume {run_dir}` continues the run")
     result = coordinator_main(cfg, bus, run_dir=run_dir, resume=args.resume is not None)
     _print_result(result, args.json)
     return 0
@@ -381,6 +401,7 @@ def add_parsers(sub) -> None:  # noqa: ANN001
     _fleet_args(p, taxis=8, minutes=20, samples=None)
     _grace_arg(p)
     p.add_argument("--check", action="store_true", help="also run the instance in-process and compare the decisions")
+    _checkpoint_args(p, "fleet")
     add_security_args(p)
     p.set_defaults(func=cmd_fleet)
 
@@ -402,11 +423,7 @@ def add_parsers(sub) -> None:  # noqa: ANN001
     c = sub.add_parser("coordinator", help="the clock and world of a distributed run; agents join it over zenoh")
     add_session_args(c)
     _fleet_args(c, taxis=8, minutes=60, samples=None)
-    c.add_argument("--run-dir", default=None, metavar="DIR",
-                   help="checkpoint the run here after each minute, so that `--resume DIR` can continue it "
-                        "(default: runs/<run> in surge's cache, $SURGE_CACHE or ~/.cache/surge)")
-    c.add_argument("--resume", default=None, metavar="RUN_DIR",
-                   help="continue the run checkpointed in RUN_DIR (its settings come from the checkpoint; the bus flags apply)")
+    _checkpoint_args(c, "coordinator")
     c.set_defaults(func=cmd_coordinator)
 
     a = sub.add_parser("agents", help="start agent processes (one per taxi) that join a run over zenoh")

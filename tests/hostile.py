@@ -51,7 +51,7 @@ def control(t: int, agent: int, value: int, **extra) -> bytes:
 
 # ------------------------------------------------------------------ probe
 def probe(a: dict) -> dict:
-    """Each forbidden act of taxi 3 (and control/3 from every other identity) against observers with the roles' certificates."""
+    """Each forbidden act of taxi 3 (and control/3, ack/3 from every other identity) against observers with the roles' certificates."""
     ep, certs, root = a["endpoint"], a["certs"], f"surge/{a['run']}"
     out: dict = {"connects": {}, "seen": [], "answers": {}}
     out["connects"]["no-cert"] = try_open(config(ep, certs)) is not None
@@ -69,6 +69,9 @@ def probe(a: dict) -> dict:
 
     co, t0, t3, t4, pr = s["coordinator"], s["taxi-0"], s["taxi-3"], s["taxi-4"], s["predictor"]
     keep = [co.declare_subscriber(f"{root}/control/*", watch("coordinator")),
+            co.declare_subscriber(f"{root}/ack/*", watch("coordinator")),
+            t0.liveliness().declare_subscriber(f"{root}/coordinator", lambda x: seen.put(("taxi-0", str(x.key_expr), "token")),
+                                               history=True),
             co.liveliness().declare_subscriber(f"{root}/alive/*", lambda x: seen.put(("coordinator", str(x.key_expr), "token")),
                                                history=True),
             co.declare_queryable(f"{root}/spec", answer("coordinator")),
@@ -78,15 +81,18 @@ def probe(a: dict) -> dict:
     keep += [t0.declare_subscriber(f"{root}/{k}", watch("taxi-0")) for k in ("state", "forecast/0", "dropoffs", "committed/*", "stop", "turn/0")]
     keep += [t3.declare_queryable(f"{root}/{k}", answer("forged")) for k in ("spec", "snapshot", "predictor", "forecast/0")]
     keep.append(co.declare_queryable(f"{root}/forecast/*", answer("coordinator")))
-    keep += [t3.liveliness().declare_token(f"{root}/alive/4"), t3.liveliness().declare_token(f"{root}/alive/3")]
+    keep += [t3.liveliness().declare_token(f"{root}/alive/4"), t3.liveliness().declare_token(f"{root}/alive/3"),
+             t3.liveliness().declare_token(f"{root}/coordinator")]
     time.sleep(1.0)
-    for k in ("control/4", "committed/0", "committed/3", "state", "forecast/0", "dropoffs", "turn/0", "turn/4", "stop"):
+    for k in ("control/4", "ack/4", "committed/0", "committed/3", "state", "forecast/0", "dropoffs", "turn/0", "turn/4", "stop"):
         t3.put(f"{root}/{k}", f"forged by taxi-3 on {k}".encode())
     others = {n: zenoh.open(config(ep, certs, n)) for n in ("coordinator", "predictor", "taxi-0", "taxi-4")}  # not the observers:
     time.sleep(0.5)  # a session delivers its own puts to itself without the router
     for name, other in others.items():
         other.put(f"{root}/control/3", f"forged by {name} on control/3".encode())
+        other.put(f"{root}/ack/3", f"forged by {name} on ack/3".encode())
     t3.put(f"{root}/control/3", b"taxi-3 on its own key")
+    t3.put(f"{root}/ack/3", b"taxi-3 acks on its own key")
     co.put(f"{root}/state", b"the coordinator's state")
     deadline = time.monotonic() + 15
     got = []
@@ -94,12 +100,21 @@ def probe(a: dict) -> dict:
         try:
             got.append(seen.get(timeout=0.2))
         except queue.Empty:
-            if any(g[2] == "taxi-3 on its own key" for g in got) and any(g[2] == "the coordinator's state" for g in got):
+            if {"taxi-3 on its own key", "taxi-3 acks on its own key", "the coordinator's state"} <= {g[2] for g in got}:
                 break
     time.sleep(1.0)  # anything still in flight from the forbidden acts
     while not seen.empty():
         got.append(seen.get())
     out["seen"] = got
+    real = co.liveliness().declare_token(f"{root}/coordinator")  # the observer hears the coordinator's own token
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline and "coordinator token" not in out:
+        try:
+            if seen.get(timeout=0.2)[1].endswith("/coordinator"):
+                out["coordinator token"] = "seen"
+        except queue.Empty:
+            pass
+    real.undeclare()
     for who, k in (("taxi-0", "spec"), ("taxi-0", "snapshot"), ("coordinator", "predictor"), ("taxi-4", "spec"), ("taxi-0", "forecast/0")):
         replies = s[who].get(f"{root}/{k}", timeout=3.0)
         out["answers"][f"{who} {k}"] = sorted(r.ok.payload.to_bytes().decode() for r in replies if r.ok is not None)

@@ -190,6 +190,27 @@ def test_router_restart_and_coordinator_resume_keep_the_uninterrupted_decisions(
     assert result["total_cost"] == ref["total_cost"]
 
 
+def test_an_interrupted_fleet_resumes_from_its_checkpoint(tmp_path: Path) -> None:
+    """`surge fleet` SIGTERMed mid-run, then `surge fleet --resume`: a new router and new agents finish the same run."""
+    run_dir, out, minutes = tmp_path / "run", tmp_path / "resumed.json", 12
+    first = Logged([*CLI, "fleet", "--taxis", "2", "--minutes", str(minutes), "--forecast", "true-rate", "--samples", "50",
+                    "--minute-seconds", "0.3", "--run-dir", str(run_dir)])
+    try:
+        assert f"--resume {run_dir}` continues the run" in first.wait_for("checkpointing each minute to")
+        first.wait_for(f"minute 5/{minutes}")
+        first.proc.send_signal(signal.SIGTERM)
+        assert first.finish(60) == 143, first.text
+    finally:
+        first.kill()
+    proc = subprocess.run([*CLI, "fleet", "--resume", str(run_dir), "--check", "--json", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "decisions identical" in proc.stdout, proc.stdout
+    result = json.loads(out.read_text())
+    assert 5 <= result["resumed_at_minute"] < minutes and len(result["controls"]) == minutes
+    assert result["same_decisions"] and result["fallbacks"] == 0
+
+
 def test_a_killed_agent_rejoins_and_a_hung_agent_costs_one_deadline(bus: Bus, tmp_path: Path) -> None:
     """Agent 1 is SIGKILLed mid-turn and restarted; then agent 2 is SIGSTOPped mid-turn and SIGCONTed."""
     run, minutes, deadline, out = "agents", 40, 1.5, tmp_path / "result.json"
@@ -224,6 +245,7 @@ def test_a_killed_agent_rejoins_and_a_hung_agent_costs_one_deadline(bus: Bus, tm
     assert fallen[0] == [] and result["fallbacks_per_agent"] == [len(fallen[a]) for a in range(3)]
     assert fallen[1], "the killed agent's turns were not counted as fallbacks"
     assert "joined run 'agents'" in agents[1].text, "the restarted agent did not rejoin"
+    assert "the coordinator's token is gone" not in agents[0].text  # its token goes with the stop at a normal end
     assert "agent 1 silent for" not in coord.text  # it took its snapshot before its token: no turn of its waited out a deadline
     assert coord.text.count("agent 2 silent for") == 1  # suspect after one deadline: no further wait, the run keeps its pace
     assert fallen[2] and min(fallen[2]) >= t_stop and max(fallen[2]) <= acked
@@ -251,6 +273,7 @@ def test_a_stopped_coordinator_stops_its_agents_within_the_grace_period(bus: Bus
             assert rc == 143 and "published stop at minute" in coord.text
             assert codes == [0, 0, 0] and took < grace
             assert all("the coordinator ended the run at minute" in a.text for a in agents)
+            assert not any("the coordinator's token is gone" in a.text for a in agents)
         else:
             assert codes == [2, 2, 2] and grace < took < grace + 15
             assert all(f"has been gone for more than {grace:g} s (the grace period); leaving" in a.text for a in agents)

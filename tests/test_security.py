@@ -115,12 +115,13 @@ def test_taxi_3s_certificate_can_do_only_what_taxi_3_does(secured: dict) -> None
     seen = [tuple(s) for s in out["seen"]]
     # what taxi 3 may do arrives, which shows the observers were listening ...
     assert ("coordinator", "surge/acl/control/3", "taxi-3 on its own key") in seen
+    assert ("coordinator", "surge/acl/ack/3", "taxi-3 acks on its own key") in seen
     assert ("coordinator", "surge/acl/alive/3", "token") in seen
     assert ("taxi-0", "surge/acl/state", "the coordinator's state") in seen
-    # ... and nothing else: no control/4, committed, state, forecast, turn or stop from taxi 3, no alive/4,
-    # and no control/3 from any other identity
-    assert [s for s in seen if "forged" in s[2] or s[1].endswith("alive/4")] == []
-    assert len(seen) == 3
+    # ... and nothing else: no control/4, ack/4, committed, state, forecast, turn or stop from taxi 3, no alive/4
+    # and no coordinator token (taxi-0 watches for one), and no control/3 or ack/3 from any other identity
+    assert [s for s in seen if "forged" in s[2] or s[1].endswith(("alive/4", "/coordinator"))] == []
+    assert len(seen) == 4 and out["coordinator token"] == "seen"
     assert out["answers"] == {"taxi-0 spec": ["coordinator"], "taxi-0 snapshot": ["coordinator"],
                               "coordinator predictor": ["predictor"], "taxi-4 spec": ["coordinator"],
                               "taxi-0 forecast/0": ["coordinator"]}
