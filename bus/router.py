@@ -30,7 +30,8 @@ def router_main(bus: SessionArgs, announce: bool = False) -> None:
             else:
                 how = "INSECURE: no TLS, no access control"
             print(f"zenoh router listening on {where}; {how}; Ctrl-C stops it", file=sys.stderr, flush=True)
-        stop.wait()
+        while not stop.wait(0.5):  # a timed wait: zenoh's threads may take the signal, and only this thread runs its handler
+            pass
 
 
 def free_tcp_port() -> int:
