@@ -235,10 +235,8 @@ def _print_result(result: dict, path: str | None) -> None:
         print(f"wrote {path}")
 
 
-def _run_dir(args, verb: str) -> tuple[FleetConfig, str]:  # noqa: ANN001
+def _run_dir(args) -> tuple[FleetConfig, str]:  # noqa: ANN001
     """The run's config and checkpoint directory: from the checkpoint with ``--resume``, else from the flags."""
-    from coordinator.runtime import log
-
     if args.resume is not None:
         cfg, run_dir = resumed_config(args.resume), args.resume
     else:
@@ -246,16 +244,23 @@ def _run_dir(args, verb: str) -> tuple[FleetConfig, str]:  # noqa: ANN001
 
         cfg = fleet_config(args)
         run_dir = args.run_dir or str(cache_dir() / "runs" / cfg.run)
-    log(f"checkpointing each minute to {run_dir}; `surge {verb} --resume {run_dir}` continues the run")
     return cfg, run_dir
+
+
+def _say_checkpoint(run_dir: str, verb: str) -> None:
+    """Once every flag has been checked: a bad flag stays a one-line error."""
+    from coordinator.runtime import log
+
+    log(f"checkpointing each minute to {run_dir}; `surge {verb} --resume {run_dir}` continues the run")
 
 
 def cmd_fleet(args) -> int:  # noqa: ANN001
     from bus.session import warn_insecure
 
-    cfg, run_dir = _run_dir(args, "fleet")
+    cfg, run_dir = _run_dir(args)
     if args.certs is not None and args.insecure:
         raise ConfigError("--certs and --insecure: choose one")
+    _say_checkpoint(run_dir, "fleet")
     roles = "a router, a predictor service, a coordinator" if cfg.predictor else "a router, a coordinator"
     if args.insecure:
         warn_insecure()
@@ -306,8 +311,9 @@ def cmd_coordinator(args) -> int:  # noqa: ANN001
     from bus.session import session_args
     from coordinator.runtime import coordinator_main
 
-    cfg, run_dir = _run_dir(args, "coordinator")
+    cfg, run_dir = _run_dir(args)
     bus = session_args(args, identity="coordinator")
+    _say_checkpoint(run_dir, "coordinator")
     result = coordinator_main(cfg, bus, run_dir=run_dir, resume=args.resume is not None)
     _print_result(result, args.json)
     return 0
