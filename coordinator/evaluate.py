@@ -116,14 +116,20 @@ def run_episode(
     return sim.result(costs, controls, plan)
 
 
-def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int) -> list[dict]:
-    """All policies (and both oracles) on one instance; rows for the requested policies."""
+def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict[str, dict] | None = None) -> list[dict]:
+    """All policies (and both oracles) on one instance; rows for the requested policies.
+
+    ``known`` holds rows of this instance already computed under the same
+    settings (:func:`borrowable`): they are kept as they are, and with them the
+    oracles' costs, so neither those policies nor the oracles run again.
+    """
+    known = known or {}
     scen = _scenario_cache(cfg)
     date = dt.date.fromisoformat(date_text)
     requests = episode_requests(scen.world, date, hour, cfg.minutes)
     start = initial_positions(scen.city, cfg.taxis, seed)
     context = EpisodeContext(city=scen.city, date=date, hour=hour, minutes=cfg.minutes, seed=seed, world=scen.world)
-    labels = list(dict.fromkeys(cfg.policies + list(ORACLES)))
+    labels = [p for p in dict.fromkeys(cfg.policies + ([] if known else list(ORACLES))) if p not in known]
     results: dict[str, EpisodeResult] = {}
     for label in labels:
         name, options = parse_policy(label)
@@ -132,10 +138,16 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int) -> list[dic
             options["seed"] = instance_seed(date, hour, seed)
         policy = make_policy(name, scen.city, **options)
         results[label] = run_episode(scen.city, policy, requests, start, context)
-    oracle_cost = results["oracle"].total_cost
-    greedy_cost = results["greedy"].total_cost if "greedy" in results else None
+    some = next(iter(known.values()), None)
+    oracle_cost = some["oracle_cost"] if some else results["oracle"].total_cost
+    auction_cost = some["oracle_auction_cost"] if some else results["oracle-auction"].total_cost
+    greedy = known.get("greedy") or results.get("greedy")
+    greedy_cost = (greedy["total_cost"] if isinstance(greedy, dict) else greedy.total_cost) if greedy else None
     rows = []
     for name in cfg.policies:
+        if name in known:
+            rows.append(dict(known[name]))
+            continue
         r = results[name]
         rows.append(
             {
@@ -149,7 +161,7 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int) -> list[dic
                 "requests": r.n_requests,
                 "wait_overhead_per_served": (r.total_cost - oracle_cost) / max(r.served, 1),
                 "oracle_cost": oracle_cost,
-                "oracle_auction_cost": results["oracle-auction"].total_cost,
+                "oracle_auction_cost": auction_cost,
                 "greedy_cost": greedy_cost,
                 "plan_seconds_per_step": float(np.mean(r.plan_seconds)),
                 "decisions_sha256": r.decisions_sha256,
@@ -158,8 +170,33 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int) -> list[dic
     return rows
 
 
-def _instance_task(task: tuple[EvalConfig, str, int, int]) -> list[dict]:
+def _instance_task(task: tuple) -> list[dict]:
     return _instance(*task)
+
+
+_SAME_EPISODES = ("scenario", "data_dir", "taxis", "minutes", "world_seed")
+
+
+def borrowable(cfg: EvalConfig, doc: dict) -> dict[tuple[str, int, int], dict[str, dict]]:
+    """Rows of the results document ``doc`` that ``cfg`` would compute identically, by instance and policy label.
+
+    Episodes are deterministic in (instance, label, options), so a row can be
+    reused when the scenario, fleet, episode length and world are the same,
+    the label's options are the same, and so are both oracles' (every row
+    carries their costs).  Nothing is borrowed otherwise.
+    """
+    theirs = doc["config"]
+    if any(getattr(cfg, k) != theirs.get(k) for k in _SAME_EPISODES):
+        return {}
+    opts = theirs.get("policy_options", {})
+    if any(cfg.policy_options.get(o) != opts.get(o) for o in ORACLES):
+        return {}
+    labels = {p for p in cfg.policies if p in theirs.get("policies", []) and cfg.policy_options.get(p) == opts.get(p)}
+    out: dict[tuple[str, int, int], dict[str, dict]] = {}
+    for e in doc["episodes"]:
+        if e["policy"] in labels:
+            out.setdefault(_key(e), {})[e["policy"]] = e
+    return out
 
 
 _SCENARIOS: dict = {}
@@ -244,12 +281,14 @@ def evaluate(
     *,
     checkpoint: str | Path | None = None,
     resume: bool = False,
+    borrow: dict | None = None,
 ) -> dict:
     """Run every (hour, seed) instance and return the ``surge.results/1`` document.
 
     With ``checkpoint``, the results file is rewritten after every finished
     instance; with ``resume`` too, the instances it already holds are kept,
-    not rerun.
+    not rerun.  ``borrow``, another results document, lends the rows it holds
+    under the same settings (:func:`borrowable`) instead of running them again.
     """
     progress = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
     scen = _scenario_cache(cfg)
@@ -258,14 +297,32 @@ def evaluate(
         make_policy(name, scen.city, **{**cfg.policy_options.get(label, {}), **options})
     episodes: list[dict] = []
     grid = [(d, h, s) for d in cfg.dates for h in cfg.hours for s in range(cfg.seeds)]
+    # Instances of the checkpoint that lack some policies' rows (see coordinator.reproduce's
+    # --refresh-model) keep the rows they have and run only the rest.
+    pending: dict[tuple[str, int, int], dict[str, dict]] = {}
     if resume and checkpoint is not None and Path(checkpoint).exists():
         wanted = set(grid)
-        episodes = [e for e in load_finished(cfg, checkpoint) if _key(e) in wanted]
-        if episodes:
-            progress(f"resuming from {checkpoint}: {len({_key(e) for e in episodes})} instances done")
+        held: dict[tuple[str, int, int], dict[str, dict]] = {}
+        for e in load_finished(cfg, checkpoint):
+            if _key(e) in wanted:
+                held.setdefault(_key(e), {})[e["policy"]] = e
+        for key, rows in held.items():
+            if set(cfg.policies) <= rows.keys():
+                episodes.extend(rows.values())
+            else:
+                pending[key] = rows
+        if held:
+            progress(f"resuming from {checkpoint}: {len(held) - len(pending)} instances done"
+                     + (f", {len(pending)} with some of their rows" if pending else ""))
     done = {_key(e) for e in episodes}
     # Seed by seed across the dates and hours, so that a run cut short has every hour at the same depth.
     tasks = [(d, h, s) for s in range(cfg.seeds) for d in cfg.dates for h in cfg.hours if (d, h, s) not in done]
+    lent = borrowable(cfg, borrow) if borrow else {}
+    for key, rows in pending.items():
+        lent[key] = {**lent.get(key, {}), **rows}
+    lent_rows = sum(len(lent.get(t, {})) for t in tasks)
+    if lent_rows:
+        progress(f"{lent_rows} rows of the {len(tasks)} instances to run are known already (same settings): they are not run again")
     t0 = time.perf_counter()
 
     def document() -> dict:
@@ -276,10 +333,11 @@ def evaluate(
             "reference_oracle": "oracle",
             "city": scen.city.summary(),
             "config": asdict(cfg),
-            "episodes": sorted(episodes, key=lambda e: order[_key(e)]),
+            "episodes": sorted(episodes + [e for rows in pending.values() for e in rows.values()], key=lambda e: order[_key(e)]),
         }
 
     def report(k: int, rows: list[dict]) -> None:
+        pending.pop(_key(rows[0]), None)
         episodes.extend(rows)
         if checkpoint is not None:
             write_json(document(), checkpoint)
@@ -287,16 +345,17 @@ def evaluate(
         costs = " ".join(f"{r['policy']}={r['total_cost']}" for r in rows)
         progress(f"[{k}/{len(tasks)}] {head['date']} hour {head['hour']} seed {head['seed']}: {costs} ({time.perf_counter() - t0:.1f} s)")
 
-    with contextlib.closing(run_instances(cfg, tasks)) as results:  # closed at once on any error: workers stop
+    with contextlib.closing(run_instances(cfg, tasks, lent)) as results:  # closed at once on any error: workers stop
         for k, rows in enumerate(results, 1):
             report(k, rows)
     return document()
 
 
-def run_instances(cfg: EvalConfig, tasks: list[tuple[str, int, int]]) -> Iterator[list[dict]]:
+def run_instances(cfg: EvalConfig, tasks: list[tuple[str, int, int]], known: dict | None = None) -> Iterator[list[dict]]:
     """The rows of each ``(date, hour, seed)`` instance, in task order: in this process, in a pool of
-    ``cfg.jobs`` worker processes, or on the Dask cluster at ``cfg.cluster``."""
-    work = [(cfg, *t) for t in tasks]
+    ``cfg.jobs`` worker processes, or on the Dask cluster at ``cfg.cluster``; ``known`` rows by instance are kept."""
+    known = known or {}
+    work = [(cfg, *t, known.get(t)) for t in tasks]
     if cfg.cluster:
         from coordinator.cluster import run_on_cluster
 

@@ -12,7 +12,8 @@ Steps, each showing progress on stderr:
    with evening events, 10 initial states each;
 5. the ablations on 10 seeds at 17 and 19 h: both rollout policies with the
    same information (previous hour, the model, true rates), surge with base
-   ``ia``, surge sampling the whole map, and pruning off for both;
+   ``ia``, surge sampling the whole map, and pruning off for both; the main
+   policies' rows and the oracles of these instances are taken from step 3;
 6. ``OUT/REPORT.md`` with its figures (:mod:`coordinator.report_md`).
 
 Every evaluation checkpoints its ``surge.results/1`` file under ``OUT`` after
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import hashlib
 import json
 import sys
 import time
@@ -159,7 +161,7 @@ def _policy_options(run: Run, labels: list[str]) -> dict[str, dict]:
     return out
 
 
-def _evaluate(run: Run, name: str, dates: list[str], hours: tuple[int, ...], seeds: int, labels: list[str]) -> dict:
+def _evaluate(run: Run, name: str, dates: list[str], hours: tuple[int, ...], seeds: int, labels: list[str], borrow: dict | None = None) -> dict:
     from coordinator.evaluate import EvalConfig, evaluate
 
     p = run.protocol
@@ -168,7 +170,7 @@ def _evaluate(run: Run, name: str, dates: list[str], hours: tuple[int, ...], see
     path = run.out / f"results-{name}.json"
     run.say(f"{name}: {len(dates)} date(s) x {len(hours)} hour(s) x {seeds} seeds, {len(labels)} policies + both oracles -> {path}")
     t0 = time.perf_counter()
-    doc = evaluate(cfg, progress=lambda msg: run.say(f"{name} {msg}"), checkpoint=path, resume=True)
+    doc = evaluate(cfg, progress=lambda msg: run.say(f"{name} {msg}"), checkpoint=path, resume=True, borrow=borrow)
     run.timings[name] = time.perf_counter() - t0
     return doc
 
@@ -201,6 +203,56 @@ def _train(run: Run) -> None:
     run.timings["train"] = time.perf_counter() - t0
 
 
+def model_fingerprint(model: Path) -> str:
+    """SHA-256 of a trained predictor's weights (its ``.pt`` and ``.npy`` files, not ``model.json``'s timestamps).
+
+    The same training command gives the same bytes on one machine; another
+    machine's arithmetic can give slightly different weights, and so different
+    ``surge`` rows.
+    """
+    h = hashlib.sha256()
+    for f in sorted(model.iterdir()):
+        if f.is_file() and f.suffix in (".pt", ".npy"):
+            h.update(f.name.encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()
+
+
+def _check_model(run: Run, refresh: bool) -> None:
+    """Refuse to mix rows computed with two predictors: ``OUT/model.sha256`` names the one the results hold.
+
+    With ``refresh``, the rows of every policy that plans with the model (and
+    the predictor's evaluation) are dropped, so that only they run again with
+    the predictor now in use; every other row is kept.
+    """
+    if not run.protocol.predictor:
+        return
+    path = run.out / "model.sha256"
+    now = model_fingerprint(run.model)
+    before = path.read_text().strip() if path.exists() else None
+    results = sorted(run.out.glob("results-*.json"))
+    if before != now and (before is not None or results):
+        if not refresh:
+            said = f"recorded {before[:12]}" if before else "not recorded"
+            raise ConfigError(f"{run.out}: its results were computed with another predictor ({said}; {run.model} is {now[:12]}); "
+                              "pass --refresh-model to rerun only the rows that use the predictor")
+        _drop_model_rows(run, results)
+    path.write_text(now + "\n")
+
+
+def _drop_model_rows(run: Run, results: list[Path]) -> None:
+    from coordinator.evaluate import read_results, write_json
+
+    for path in results:
+        doc = read_results(path)
+        opts = doc["config"].get("policy_options", {})
+        uses = {label for label in doc["config"]["policies"] if "model" in opts.get(label, {})}
+        keep = [e for e in doc["episodes"] if e["policy"] not in uses]
+        write_json({**doc, "episodes": keep}, path)
+        run.say(f"{path.name}: dropped {len(doc['episodes']) - len(keep)} rows of {', '.join(sorted(uses)) or 'no policy'} (--refresh-model)")
+    for name in ("predictor-eval.json", "fig-predictor-pe.png"):
+        (run.out / name).unlink(missing_ok=True)
+
+
 def _predictor_eval(run: Run) -> dict | None:
     if not run.protocol.predictor:
         return None
@@ -215,7 +267,7 @@ def _predictor_eval(run: Run) -> dict | None:
     return json.loads(path.read_text())
 
 
-def reproduce(run: Run) -> Path:
+def reproduce(run: Run, refresh_model: bool = False) -> Path:
     """Run every step (resuming what is done) and write ``OUT/REPORT.md``; returns its path."""
     from city.scenario import load_scenario
     from coordinator import report_md
@@ -227,6 +279,7 @@ def reproduce(run: Run) -> Path:
     p = run.protocol
     t_all = time.perf_counter()
     _train(run)
+    _check_model(run, refresh_model)
     pe = _predictor_eval(run)
     scen = load_scenario(run.scenario, run.data)
     docs = {"main": _evaluate(run, "main", [PAPER_DATE], p.hours, p.seeds, list(MAIN_POLICIES))}
@@ -234,7 +287,8 @@ def reproduce(run: Run) -> Path:
     if dates:
         docs["dates"] = _evaluate(run, "dates", dates, p.other_hours, p.other_seeds, list(MAIN_POLICIES))
     ablations = [a for a in ABLATIONS if p.predictor or "forecast=model" not in a]
-    docs["ablation"] = _evaluate(run, "ablation", [PAPER_DATE], p.ablation_hours, p.ablation_seeds, list(MAIN_POLICIES) + ablations)
+    docs["ablation"] = _evaluate(run, "ablation", [PAPER_DATE], p.ablation_hours, p.ablation_seeds, list(MAIN_POLICIES) + ablations,
+                                 borrow=docs["main"])
     run.say("figures and REPORT.md")
     t0 = time.perf_counter()
     report = report_md.write_report(run, scen, docs, pe)
@@ -254,6 +308,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--smoke", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--jobs", type=int, default=1, help="worker processes for the evaluations")
     p.add_argument("--model", default=None, help="reuse this trained predictor directory instead of training OUT/model")
+    p.add_argument("--refresh-model", action="store_true",
+                   help="the predictor changed since OUT's results: rerun only the rows that plan with it, keep the rest")
     p.set_defaults(func=cmd_reproduce)
 
 
@@ -272,5 +328,5 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     command = " ".join(["surge reproduce --scenario", args.scenario] + [f if v is True else f"{f} {v}" for f, v in flags if v])
     run = Run(out=Path(args.out), scenario=args.scenario, data=args.data, protocol=replace(protocol, jobs=args.jobs), model_dir=model,
               command=command)
-    print(reproduce(run))
+    print(reproduce(run, refresh_model=args.refresh_model))
     return 0

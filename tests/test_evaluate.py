@@ -10,7 +10,7 @@ import pytest
 
 from city.errors import ConfigError, DataError
 from coordinator.analysis import bootstrap_ci, compare, complete_seeds, format_comparison, oracle_exceptions, summarize
-from coordinator.evaluate import EvalConfig, evaluate, instance_seed, parse_policy, read_results, write_json
+from coordinator.evaluate import EvalConfig, borrowable, evaluate, instance_seed, parse_policy, read_results, write_json
 
 
 #: The route-planning oracle with a short search: these tests are about the harness, not the planner.
@@ -39,6 +39,26 @@ def test_parallel_workers_give_the_same_results(small_run: dict) -> None:
     cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST, jobs=2)
     par = evaluate(cfg, progress=lambda _msg: None)
     assert [e["decisions_sha256"] for e in par["episodes"]] == [e["decisions_sha256"] for e in small_run["episodes"]]
+
+
+def test_rows_borrowed_from_an_earlier_run_are_those_a_fresh_run_computes(small_run: dict) -> None:
+    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "surge:samples=8,forecast=true-rate"], policy_options=FAST)
+    log: list[str] = []
+    lent = evaluate(cfg, progress=log.append, borrow=small_run)
+    fresh = evaluate(cfg, progress=lambda _msg: None)
+    assert any("4 rows of the 2 instances to run are known already" in m for m in log)
+    key = lambda e: (e["policy"], e["seed"], e["decisions_sha256"], e["total_cost"], e["oracle_cost"], e["oracle_auction_cost"], e["greedy_cost"])
+    assert sorted(map(key, lent["episodes"])) == sorted(map(key, fresh["episodes"]))
+    timed = {(e["policy"], e["seed"]): e["plan_seconds_per_step"] for e in small_run["episodes"]}
+    assert all(e["plan_seconds_per_step"] == timed[(e["policy"], e["seed"])] for e in lent["episodes"] if e["policy"] != "surge:samples=8,forecast=true-rate")
+
+
+def test_nothing_is_borrowed_across_different_settings(small_run: dict) -> None:
+    assert len(borrowable(EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy"], policy_options=FAST), small_run)) == 2
+    assert borrowable(EvalConfig(hours=[19], seeds=2, taxis=41, minutes=20, policies=["greedy"], policy_options=FAST), small_run) == {}
+    assert borrowable(EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy"]), small_run) == {}
+    other = {"oracle": {"iters": 200}, "ia": {"colour": 1}}
+    assert borrowable(EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["ia"], policy_options=other), small_run) == {}
 
 
 def test_oracle_is_cheapest_and_has_zero_overhead(small_run: dict) -> None:
@@ -173,3 +193,17 @@ def test_several_dates_pair_by_instance() -> None:
         ("2022-11-17", "greedy"), ("2022-11-17", "ia"), ("2022-10-06", "greedy"), ("2022-10-06", "ia")]
     (row,) = compare(doc, "ia")
     assert row["n"] == 2 and row["dates"] == 2
+
+
+def test_a_checkpoint_missing_some_rows_runs_only_those(small_run: dict, tmp_path: Path) -> None:
+    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
+    path = tmp_path / "partial.json"
+    write_json({**small_run, "episodes": [e for e in small_run["episodes"] if e["policy"] != "ia"]}, path)
+    log: list[str] = []
+    resumed = evaluate(cfg, progress=log.append, checkpoint=path, resume=True)
+    assert any("0 instances done, 2 with some of their rows" in m for m in log)
+    key = lambda e: (e["policy"], e["seed"], e["decisions_sha256"], e["total_cost"])
+    assert list(map(key, resumed["episodes"])) == list(map(key, small_run["episodes"]))
+    timed = {(e["policy"], e["seed"]): e["plan_seconds_per_step"] for e in small_run["episodes"]}
+    assert all(e["plan_seconds_per_step"] == timed[(e["policy"], e["seed"])] for e in resumed["episodes"] if e["policy"] != "ia")
+    assert read_results(path)["episodes"] == resumed["episodes"]
