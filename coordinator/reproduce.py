@@ -28,6 +28,7 @@ import argparse
 import datetime as dt
 import hashlib
 import json
+import os
 import sys
 import time
 from dataclasses import dataclass, field, replace
@@ -306,7 +307,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="reproduce-out", help="output directory; a rerun resumes from what it holds")
     p.add_argument("--quick", action="store_true", help="5 seeds, one date, 2 ablation seeds at 19 h, 100 samples, small predictor")
     p.add_argument("--smoke", action="store_true", help=argparse.SUPPRESS)
-    p.add_argument("--jobs", type=int, default=1, help="worker processes for the evaluations")
+    p.add_argument("--jobs", type=int, default=None, help="worker processes for the evaluations (default: one per core)")
     p.add_argument("--model", default=None, help="reuse this trained predictor directory instead of training OUT/model")
     p.add_argument("--refresh-model", action="store_true",
                    help="the predictor changed since OUT's results: rerun only the rows that plan with it, keep the rest")
@@ -317,16 +318,17 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from city.scenario import check_scenario
 
     check_scenario(args.scenario, args.data)
-    if args.jobs < 1:
+    if args.jobs is not None and args.jobs < 1:
         raise ConfigError(f"--jobs must be at least 1, got {args.jobs}")
+    jobs = args.jobs or (1 if args.smoke else os.cpu_count() or 1)
     protocol = SMOKE if args.smoke else QUICK if args.quick else FULL
     model = Path(args.model) if args.model else None
     if model is not None and not (model / "model.json").exists():
         raise ConfigError(f"--model {model}: no model.json there (train one with surge predictor train)")
     flags = [("--data", args.data), ("--out", args.out), ("--quick", args.quick), ("--smoke", args.smoke),
-             ("--jobs", args.jobs if args.jobs != 1 else None), ("--model", args.model)]
+             ("--jobs", args.jobs), ("--model", args.model)]
     command = " ".join(["surge reproduce --scenario", args.scenario] + [f if v is True else f"{f} {v}" for f, v in flags if v])
-    run = Run(out=Path(args.out), scenario=args.scenario, data=args.data, protocol=replace(protocol, jobs=args.jobs), model_dir=model,
+    run = Run(out=Path(args.out), scenario=args.scenario, data=args.data, protocol=replace(protocol, jobs=jobs), model_dir=model,
               command=command)
     print(reproduce(run, refresh_model=args.refresh_model))
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 from coordinator.cli import main
@@ -25,3 +26,33 @@ def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys) -
     assert main(["reproduce", "--smoke", "--out", str(out)]) == 0
     err = capsys.readouterr().err
     assert "main resuming from" in err and "[1/" not in err.split("ablation")[0]  # finished episodes are not rerun
+
+
+def test_results_of_another_predictor_are_refused_or_refreshed(tmp_path: Path) -> None:
+    import pytest
+    import torch
+
+    from city.errors import ConfigError
+    from coordinator.evaluate import EvalConfig, evaluate, read_results, write_json
+    from coordinator.reproduce import SMOKE, Run, _check_model, model_fingerprint
+
+    model, out = tmp_path / "model", tmp_path / "out"
+    model.mkdir()
+    out.mkdir()
+    torch.save({"w": torch.arange(4.0)}, model / "standard.pt")
+    doc = evaluate(EvalConfig(hours=[19], seeds=1, taxis=8, minutes=4, policies=["greedy", "ia"], policy_options={"oracle": {"iters": 20}}),
+                   progress=lambda _m: None)
+    doc["config"]["policy_options"]["ia"] = {"model": str(model)}  # as if ia planned with the predictor
+    write_json(doc, out / "results-main.json")
+    (out / "predictor-eval.json").write_text("{}")
+    run = Run(out=out, scenario="synthetic", data=None, protocol=replace(SMOKE, predictor=True), model_dir=model)
+    with pytest.raises(ConfigError, match="not recorded.*--refresh-model"):
+        _check_model(run, refresh=False)
+    _check_model(run, refresh=True)
+    assert [e["policy"] for e in read_results(out / "results-main.json")["episodes"]] == ["greedy"]
+    assert not (out / "predictor-eval.json").exists()
+    assert (out / "model.sha256").read_text().strip() == model_fingerprint(model)
+    _check_model(run, refresh=False)  # the same predictor: nothing to say
+    torch.save({"w": torch.arange(5.0)}, model / "standard.pt")
+    with pytest.raises(ConfigError, match="recorded [0-9a-f]{12}"):
+        _check_model(run, refresh=False)
