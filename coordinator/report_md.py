@@ -168,7 +168,8 @@ def _model_lines(run) -> list[str]:
     meta = json.loads((run.model / "model.json").read_text())
     how = "reused (`--model`)" if run.model_dir is not None else "trained by this run"
     lines = [f"The model: `{run.model}`, {how}. Early stopping on the validation months; epoch cap "
-             f"{meta['training']['epochs']} (event-sector networks {meta['training'].get('event_epochs') or meta['training']['epochs']}).", "",
+             f"{meta['training']['epochs']} (event-sector networks {meta['training'].get('event_epochs') or meta['training']['epochs']}); "
+             f"{meta['features']['q_max']} reviews read per event (the paper's Q_max: 100).", "",
              "| network | hidden widths | epochs run | best epoch | stopped early |", "|---|---|---|---|---|"]
     for name, net in meta["networks"].items():
         widths = "×".join(str(w) for w in net["hidden"])

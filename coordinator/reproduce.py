@@ -56,13 +56,17 @@ class Protocol:
     oracle_iters: int | None = None
     epochs: int = 100
     event_epochs: int | None = None
+    #: Reviews read per event by the predictor (the paper's Q_max; None: the default, 100).
+    max_reviews: int | None = None
     predictor: bool = True
     jobs: int = 1
     gif_minutes: int = 60
 
 
 FULL = Protocol()
-QUICK = Protocol(seeds=5, other_dates=0, ablation_hours=(19,), ablation_seeds=2, samples=100, epochs=5, event_epochs=1, gif_minutes=30)
+#: The small predictor reads 5 reviews per event: half the texts to embed, which is half its training time.
+QUICK = Protocol(seeds=5, other_dates=0, ablation_hours=(19,), ablation_seeds=2, samples=100, epochs=5, event_epochs=1, max_reviews=5,
+                 gif_minutes=30)
 #: Seconds' worth, for the CI smoke test: no predictor (training embeds a year of event texts), so
 #: ``surge`` plans with the true rates there and the report says so.
 SMOKE = Protocol(hours=(19,), seeds=1, other_dates=0, ablation_hours=(19,), ablation_seeds=1, taxis=8, minutes=6,
@@ -197,6 +201,8 @@ def _train(run: Run) -> None:
     argv = ["predictor", "train", "--scenario", run.scenario, "--out", str(run.model), "--epochs", str(run.protocol.epochs)]
     if run.protocol.event_epochs is not None:
         argv += ["--event-epochs", str(run.protocol.event_epochs)]
+    if run.protocol.max_reviews is not None:
+        argv += ["--max-reviews", str(run.protocol.max_reviews)]
     if run.data:
         argv += ["--data", run.data]
     args = _predictor_parser().parse_args(argv)
@@ -305,7 +311,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", default="synthetic", help="synthetic (embedded) or nyc (needs --data)")
     p.add_argument("--data", default=None, help="data directory laid out like shared/data (for --scenario nyc)")
     p.add_argument("--out", default="reproduce-out", help="output directory; a rerun resumes from what it holds")
-    p.add_argument("--quick", action="store_true", help="5 seeds, one date, 2 ablation seeds at 19 h, 100 samples, small predictor")
+    p.add_argument("--quick", action="store_true", help="5 seeds, one date, 2 ablation seeds at 19 h, 100 samples, small predictor (5 reviews per event)")
     p.add_argument("--smoke", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--jobs", type=int, default=None, help="worker processes for the evaluations (default: one per core)")
     p.add_argument("--model", default=None, help="reuse this trained predictor directory instead of training OUT/model")

@@ -24,6 +24,8 @@ def add_parser(subparsers) -> None:
     t.add_argument("--window", type=_window, default=None,
                    help="hours before an event's start and after its end in which it counts for its sector, LEAD,LAG (default 0,0, "
                         "chosen on the validation months)")
+    t.add_argument("--max-reviews", type=int, default=None,
+                   help="reviews read per event, the paper's Q_max (default 100); fewer embed faster, for a small predictor")
     t.add_argument("--no-ablation", action="store_true", help="train only the system's networks (skip the metadata and shuffled-text networks)")
     t.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help="embedding and training device (auto: CUDA where present)")
     t.add_argument("--encoder", default=None, help="sentence-transformers model name or path (default: bundled all-MiniLM-L6-v2)")
@@ -106,6 +108,8 @@ def train_main(args) -> int:
         raise ConfigError("--epochs must be >= 0")
     if args.patience < 0:
         raise ConfigError("--patience must be >= 0")
+    if args.max_reviews is not None and args.max_reviews < 1:
+        raise ConfigError(f"--max-reviews must be at least 1, got {args.max_reviews}")
     if args.reviews and not args.events:
         raise ConfigError("--reviews needs --events (the reviews are of those events)")
     t0 = time.perf_counter()
@@ -136,6 +140,7 @@ def train_main(args) -> int:
         lead_hours=lead,
         lag_hours=lag,
         ablation=not args.no_ablation,
+        **({"q_max": args.max_reviews} if args.max_reviews is not None else {}),
         log=log_line,
     )
     return 0

@@ -46,6 +46,7 @@ def run_cli(*args: str) -> subprocess.CompletedProcess:
         (["report", "/nonexistent.json"], "/nonexistent.json: no such file"),
         (["predictor", "serve", "--forecast", "bogus"], "unknown forecast 'bogus'"),
         (["predictor", "serve"], "forecast 'model' needs a trained predictor"),
+        (["predictor", "train", "--out", "unused", "--max-reviews", "0"], "--max-reviews must be at least 1, got 0"),
     ],
 )
 def test_bad_options_give_one_line_and_exit_2(args: list[str], message: str, capsys: pytest.CaptureFixture) -> None:

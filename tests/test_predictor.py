@@ -109,6 +109,18 @@ def test_embedding_offline_and_cached(cache: Path) -> None:
 
 
 
+def test_max_reviews_limits_the_texts_embedded(world: TinyWorld) -> None:
+    from predictor.embed import Embedder
+    from predictor.features import EventFeaturizer
+
+    counts = {}
+    for q in (1, 100):
+        feat = EventFeaturizer(Embedder(None, use_cache=False), q_max=q)
+        feat.prepare(world.events)
+        counts[q] = feat.embedder.stats["embedded"]
+    assert counts == {1: 4, 100: 8}  # two event texts, then the first review of each set or all three distinct ones
+
+
 def test_cache_keeps_digests_ending_in_nul(tmp_path: Path) -> None:
     from predictor.embed import EmbeddingCache
 
