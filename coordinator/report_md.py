@@ -179,6 +179,8 @@ def _model_lines(run) -> list[str]:
 
 def write_report(run, scen, docs: dict, pe: dict | None) -> Path:
     """Figures and ``REPORT.md`` in ``run.out``; returns the report's path."""
+    from coordinator.reproduce import pruning_pairs
+
     out = run.out
     main = complete_seeds(docs["main"])
     lines = [f"# surge reproduce: {run.scenario}", "",
@@ -232,8 +234,7 @@ def write_report(run, scen, docs: dict, pe: dict | None) -> Path:
     lines += paired_rows(abl, [("surge:forecast=previous-hour", "garces2023"), ("surge", "garces2023:forecast=model"),
                                ("surge:forecast=true-rate", "garces2023:forecast=true-rate")])
     lines += ["", "### Base policy (paper Table 4), whole-map sampling, pruning off", ""]
-    lines += paired_rows(abl, [("surge:base=ia", "surge"), ("surge:scope=map", "surge"), ("surge:prune=none", "surge"),
-                               ("garces2023:prune=none", "garces2023")])
+    lines += paired_rows(abl, [("surge:base=ia", "surge"), ("surge:scope=map", "surge"), *pruning_pairs(run.protocol)])
     ab = _by(summarize(abl))
     lines += ["", "Table 4 beside the paper's (total cost of our approach with each base policy; the paper's printed scale differs from its Table 1, so compare the ratio):", ""]
     lines += _table(["hour", "ours: base ia", "ours: base greedy", "ours ia / greedy", "paper: base ia", "paper: base greedy", "paper ia / greedy"],

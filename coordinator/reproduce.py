@@ -12,7 +12,8 @@ Steps, each showing progress on stderr:
    with evening events, 10 initial states each;
 5. the ablations on 10 seeds at 17 and 19 h: both rollout policies with the
    same information (previous hour, the model, true rates), surge with base
-   ``ia``, surge sampling the whole map, and pruning off for both; the main
+   ``ia``, surge sampling the whole map, and pruning off for both (pruned and
+   unpruned at :data:`PRUNE_SAMPLES` samples); the main
    policies' rows and the oracles of these instances are taken from step 3;
 6. ``OUT/REPORT.md`` with its figures (:mod:`coordinator.report_md`).
 
@@ -80,9 +81,18 @@ ABLATIONS = (
     "garces2023:forecast=true-rate",
     "surge:base=ia",
     "surge:scope=map",
-    "surge:prune=none",
-    "garces2023:prune=none",
 )
+#: Rollout samples of the pruning ablation, pruned and unpruned alike. Unpruned, ``garces2023``
+#: samples the whole map for every decision: about 250 s of planning per episode at 100 samples on
+#: 2 cores, so some 40 minutes at the default 1,000, for each of the 20 ablation instances.
+PRUNE_SAMPLES = 100
+
+
+def pruning_pairs(protocol: Protocol) -> list[tuple[str, str]]:
+    """``(unpruned, pruned)`` labels of the pruning ablation for both rollout policies, at :data:`PRUNE_SAMPLES` or fewer."""
+    if protocol.samples is not None and protocol.samples <= PRUNE_SAMPLES:
+        return [(f"{p}:prune=none", p) for p in ("surge", "garces2023")]
+    return [(f"{p}:prune=none,samples={PRUNE_SAMPLES}", f"{p}:samples={PRUNE_SAMPLES}") for p in ("surge", "garces2023")]
 
 
 @dataclass
@@ -294,6 +304,7 @@ def reproduce(run: Run, refresh_model: bool = False) -> Path:
     if dates:
         docs["dates"] = _evaluate(run, "dates", dates, p.other_hours, p.other_seeds, list(MAIN_POLICIES))
     ablations = [a for a in ABLATIONS if p.predictor or "forecast=model" not in a]
+    ablations += [label for pair in pruning_pairs(p) for label in pair if label not in MAIN_POLICIES]
     docs["ablation"] = _evaluate(run, "ablation", [PAPER_DATE], p.ablation_hours, p.ablation_seeds, list(MAIN_POLICIES) + ablations,
                                  borrow=docs["main"])
     run.say("figures and REPORT.md")
