@@ -33,7 +33,7 @@ import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 import inspect
-from typing import Callable, Iterator
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -138,11 +138,13 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
             options["seed"] = instance_seed(date, hour, seed)
         policy = make_policy(name, scen.city, **options)
         results[label] = run_episode(scen.city, policy, requests, start, context)
+    def total(label: str) -> int:
+        return known[label]["total_cost"] if label in known else results[label].total_cost
+
     some = next(iter(known.values()), None)
-    oracle_cost = some["oracle_cost"] if some else results["oracle"].total_cost
-    auction_cost = some["oracle_auction_cost"] if some else results["oracle-auction"].total_cost
-    greedy = known.get("greedy") or results.get("greedy")
-    greedy_cost = (greedy["total_cost"] if isinstance(greedy, dict) else greedy.total_cost) if greedy else None
+    oracle_cost = some["oracle_cost"] if some else total("oracle")
+    auction_cost = some["oracle_auction_cost"] if some else total("oracle-auction")
+    greedy_cost = total("greedy") if "greedy" in known or "greedy" in results else None
     rows = []
     for name in cfg.policies:
         if name in known:
@@ -192,10 +194,14 @@ def borrowable(cfg: EvalConfig, doc: dict) -> dict[tuple[str, int, int], dict[st
     if any(cfg.policy_options.get(o) != opts.get(o) for o in ORACLES):
         return {}
     labels = {p for p in cfg.policies if p in theirs.get("policies", []) and cfg.policy_options.get(p) == opts.get(p)}
+    return _by_instance(e for e in doc["episodes"] if e["policy"] in labels)
+
+
+def _by_instance(episodes: Iterable[dict]) -> dict[tuple[str, int, int], dict[str, dict]]:
+    """Rows grouped by instance, then by policy label."""
     out: dict[tuple[str, int, int], dict[str, dict]] = {}
-    for e in doc["episodes"]:
-        if e["policy"] in labels:
-            out.setdefault(_key(e), {})[e["policy"]] = e
+    for e in episodes:
+        out.setdefault(_key(e), {})[e["policy"]] = e
     return out
 
 
@@ -302,10 +308,7 @@ def evaluate(
     pending: dict[tuple[str, int, int], dict[str, dict]] = {}
     if resume and checkpoint is not None and Path(checkpoint).exists():
         wanted = set(grid)
-        held: dict[tuple[str, int, int], dict[str, dict]] = {}
-        for e in load_finished(cfg, checkpoint):
-            if _key(e) in wanted:
-                held.setdefault(_key(e), {})[e["policy"]] = e
+        held = _by_instance(e for e in load_finished(cfg, checkpoint) if _key(e) in wanted)
         for key, rows in held.items():
             if set(cfg.policies) <= rows.keys():
                 episodes.extend(rows.values())

@@ -99,6 +99,7 @@ def _window(text: str) -> tuple[int, int]:
 # ---------------------------------------------------------------- handlers
 def train_main(args) -> int:
     from predictor.inputs import load_world, record_inputs
+    from predictor.cluster import Q_MAX
     from predictor.features import LAG_HOURS, LEAD_HOURS
     from predictor.model import train_model
     from predictor.nets import EVENT_HIDDEN, STANDARD_HIDDEN
@@ -140,7 +141,7 @@ def train_main(args) -> int:
         lead_hours=lead,
         lag_hours=lag,
         ablation=not args.no_ablation,
-        **({"q_max": args.max_reviews} if args.max_reviews is not None else {}),
+        q_max=args.max_reviews or Q_MAX,
         log=log_line,
     )
     return 0
