@@ -13,7 +13,7 @@ Steps, each showing progress on stderr:
 5. the ablations on 10 seeds at 17 and 19 h: both rollout policies with the
    same information (previous hour, the model, true rates), surge with base
    ``ia``, surge sampling the whole map, and pruning off for both (pruned and
-   unpruned at :data:`PRUNE_SAMPLES` samples); the main
+   unpruned at the protocol's ``prune_samples``); the main
    policies' rows and the oracles of these instances are taken from step 3;
 6. ``OUT/REPORT.md`` with its figures (:mod:`coordinator.report_md`).
 
@@ -59,15 +59,24 @@ class Protocol:
     event_epochs: int | None = None
     #: Reviews read per event by the predictor (the paper's Q_max; None: the default, 100).
     max_reviews: int | None = None
+    #: Hidden widths of the standard and event-sector networks (None: the paper's 256,256 and 4096,4096).
+    hidden: tuple[int, ...] | None = None
+    event_hidden: tuple[int, ...] | None = None
+    #: Rollout samples of the pruning ablation, pruned and unpruned alike. Unpruned, ``garces2023``
+    #: samples the whole map for every decision: about 250 s of planning per episode at 100 samples
+    #: on 2 cores, so some 40 minutes at the default 1,000, for each of the 20 ablation instances.
+    prune_samples: int = 100
     predictor: bool = True
     jobs: int = 1
     gif_minutes: int = 60
 
 
 FULL = Protocol()
-#: The small predictor reads 5 reviews per event: half the texts to embed, which is half its training time.
+#: The small predictor reads 5 reviews per event (half the texts to embed) and has the widths of the
+#: full run's committed predictor (128,128 and 512,512). The pruning pair runs at 30 samples: unpruned
+#: ``garces2023`` at 100 samples alone took about 250 s per episode, the quick run's longest step.
 QUICK = Protocol(seeds=5, other_dates=0, ablation_hours=(19,), ablation_seeds=2, samples=100, epochs=5, event_epochs=1, max_reviews=5,
-                 gif_minutes=30)
+                 hidden=(128, 128), event_hidden=(512, 512), prune_samples=30, gif_minutes=30)
 #: Seconds' worth, for the CI smoke test: no predictor (training embeds a year of event texts), so
 #: ``surge`` plans with the true rates there and the report says so.
 SMOKE = Protocol(hours=(19,), seeds=1, other_dates=0, ablation_hours=(19,), ablation_seeds=1, taxis=8, minutes=6,
@@ -82,17 +91,14 @@ ABLATIONS = (
     "surge:base=ia",
     "surge:scope=map",
 )
-#: Rollout samples of the pruning ablation, pruned and unpruned alike. Unpruned, ``garces2023``
-#: samples the whole map for every decision: about 250 s of planning per episode at 100 samples on
-#: 2 cores, so some 40 minutes at the default 1,000, for each of the 20 ablation instances.
-PRUNE_SAMPLES = 100
 
 
 def pruning_pairs(protocol: Protocol) -> list[tuple[str, str]]:
-    """``(unpruned, pruned)`` labels of the pruning ablation for both rollout policies, at :data:`PRUNE_SAMPLES` or fewer."""
-    if protocol.samples is not None and protocol.samples <= PRUNE_SAMPLES:
+    """``(unpruned, pruned)`` labels of the pruning ablation for both rollout policies, at the protocol's ``prune_samples`` or fewer."""
+    n = protocol.prune_samples
+    if protocol.samples is not None and protocol.samples <= n:
         return [(f"{p}:prune=none", p) for p in ("surge", "garces2023")]
-    return [(f"{p}:prune=none,samples={PRUNE_SAMPLES}", f"{p}:samples={PRUNE_SAMPLES}") for p in ("surge", "garces2023")]
+    return [(f"{p}:prune=none,samples={n}", f"{p}:samples={n}") for p in ("surge", "garces2023")]
 
 
 @dataclass
@@ -213,6 +219,9 @@ def _train(run: Run) -> None:
         argv += ["--event-epochs", str(run.protocol.event_epochs)]
     if run.protocol.max_reviews is not None:
         argv += ["--max-reviews", str(run.protocol.max_reviews)]
+    for flag, widths in (("--hidden", run.protocol.hidden), ("--event-hidden", run.protocol.event_hidden)):
+        if widths is not None:
+            argv += [flag, ",".join(map(str, widths))]
     if run.data:
         argv += ["--data", run.data]
     args = _predictor_parser().parse_args(argv)
@@ -322,7 +331,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", default="synthetic", help="synthetic (embedded) or nyc (needs --data)")
     p.add_argument("--data", default=None, help="data directory laid out like shared/data (for --scenario nyc)")
     p.add_argument("--out", default="reproduce-out", help="output directory; a rerun resumes from what it holds")
-    p.add_argument("--quick", action="store_true", help="5 seeds, one date, 2 ablation seeds at 19 h, 100 samples, small predictor (5 reviews per event)")
+    p.add_argument("--quick", action="store_true", help="5 seeds, one date, 2 ablation seeds at 19 h, 100 samples (the pruning pair 30), small predictor (5 reviews per event)")
     p.add_argument("--smoke", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--jobs", type=int, default=None, help="worker processes for the evaluations (default: one per core)")
     p.add_argument("--model", default=None, help="reuse this trained predictor directory instead of training OUT/model")

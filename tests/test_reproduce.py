@@ -58,9 +58,11 @@ def test_results_of_another_predictor_are_refused_or_refreshed(tmp_path: Path) -
         _check_model(run, refresh=False)
 
 
-def test_the_pruning_ablation_runs_at_100_samples_pruned_and_unpruned() -> None:
+def test_the_pruning_ablation_runs_at_one_sample_count_pruned_and_unpruned() -> None:
     from coordinator.reproduce import FULL, QUICK, pruning_pairs
 
     assert pruning_pairs(FULL) == [("surge:prune=none,samples=100", "surge:samples=100"),
                                    ("garces2023:prune=none,samples=100", "garces2023:samples=100")]
-    assert pruning_pairs(QUICK) == [("surge:prune=none", "surge"), ("garces2023:prune=none", "garces2023")]
+    assert pruning_pairs(QUICK) == [("surge:prune=none,samples=30", "surge:samples=30"),
+                                    ("garces2023:prune=none,samples=30", "garces2023:samples=30")]
+    assert pruning_pairs(replace(QUICK, samples=20)) == [("surge:prune=none", "surge"), ("garces2023:prune=none", "garces2023")]
