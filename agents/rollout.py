@@ -362,6 +362,17 @@ def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False) -> int
     return int(inp.cands[int(np.argmin(totals))])
 
 
+def set_kernel_threads(n: int) -> None:
+    """Threads of this thread's rollout kernel, at most the cores numba sees; decisions do not depend on it (:func:`K.rollout_costs`).
+
+    Agents that share a host plan side by side, each on fewer threads, rather
+    than each spreading over every core at once.
+    """
+    if n < 1:
+        raise ValueError(f"kernel threads must be at least 1, got {n}")
+    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+
+
 def warm_up(city: City | None = None, config: RolloutConfig | None = None, serial: bool = False) -> None:
     """Plan once on a made-up minute with two samples: loads the compiled kernels, or compiles them on a fresh checkout.
 

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.rollout import RolloutConfig, StepContext, candidate_controls, plan_agent, prepare_step, warm_up
+from agents.rollout import RolloutConfig, StepContext, candidate_controls, plan_agent, prepare_step, set_kernel_threads, warm_up
 from agents.sector_forecasts import AgentForecasts, needed_sectors
 from bus.checks import Bounds, Rejections, check_choice, check_spec, check_state, check_stop, check_turn
 from bus.delta import StateView
@@ -65,6 +65,8 @@ class AgentConfig:
     data_dir: str | None = None
     #: Seconds to wait for a vanished coordinator (a restart, a resume) before leaving.
     grace_s: float = 30.0
+    #: Threads of this agent's rollout kernel (``None``: every core); see :func:`agents.rollout.set_kernel_threads`.
+    threads: int | None = None
 
 
 class CoordinatorGone(SurgeError):
@@ -144,6 +146,8 @@ class TaxiAgent:
 
     def _warm_up(self) -> None:
         """Load (or build) the compiled kernels before joining, so that a fresh checkout's first turn is not late."""
+        if self.cfg.threads is not None:
+            set_kernel_threads(self.cfg.threads)
         warm_up(self.city, self.rollout)
 
     def _fetch_spec(self, session) -> RunSpec:  # noqa: ANN001

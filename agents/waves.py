@@ -18,8 +18,8 @@ the same as strictly sequential turns (``tests/test_planning_speed.py``,
 ``tests/test_waves.py``).  The number of waves is the critical path of the
 minute.  This module is the one place that decides it, for the in-process
 policy (threads, ``workers``) and for the distributed coordinator, which
-releases each wave's turns at once and sends each agent the commitments of
-its ``depends``.  Busy taxis are not planned and constrain nothing.
+releases each agent's turn as soon as its ``depends`` have committed and
+sends it their commitments.  Busy taxis are not planned and constrain nothing.
 """
 
 from __future__ import annotations

@@ -113,8 +113,13 @@ def sequential_in_process(cfg: FleetConfig) -> dict:
     return {"decisions_sha256": decisions_hash(controls), "minute_seconds": minute_s, "plan_s": plan_s}
 
 
-def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: list[int]) -> dict:
-    """The benchmark's figures from the two runs (see the module docstring)."""
+def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: list[int], agent_threads: int | None = None) -> dict:
+    """The benchmark's figures from the two runs (see the module docstring).
+
+    Per minute, the agents' own planning seconds (summed) stand beside the
+    sequential planner's, so that planning slowed by sharing the cores is
+    told from time lost between turns.
+    """
     in_waves = [sum(w["seconds"] for w in minute) for minute in dist["waves"]]
     overhead = [max(0.0, m - w) for m, w in zip(dist["minute_seconds"], in_waves)]
     projected = {str(h): project_minutes(dist["waves"], seq["plan_s"], overhead, cfg.taxis, h) for h in hosts}
@@ -123,7 +128,7 @@ def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: l
     return {
         "schema": "surge.bench.fleet/1",
         "config": {"scenario": cfg.scenario, "taxis": cfg.taxis, "minutes": cfg.minutes, "date": cfg.date, "hour": cfg.hour,
-                   "policy": cfg.policy, "options": cfg.options, "secured": dist.get("secured")},
+                   "policy": cfg.policy, "options": cfg.options, "secured": dist.get("secured"), "agent_threads": agent_threads},
         "same_decisions": dist["decisions_sha256"] == seq["decisions_sha256"],
         "decisions_sha256": {"distributed": dist["decisions_sha256"], "in_process": seq["decisions_sha256"]},
         "fallbacks": dist["fallbacks"],
@@ -137,7 +142,10 @@ def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: l
         "projected_minute_seconds_median": {h: median(v) for h, v in projected.items()},
         "per_minute": [{"t": t, "free": dist["free_per_minute"][t], "critical_path": dist["critical_path"][t],
                         "distributed_s": dist["minute_seconds"][t], "sequential_s": seq["minute_seconds"][t],
-                        "outside_waves_s": overhead[t], **{f"projected_{h}_s": v[t] for h, v in projected.items()}}
+                        "outside_waves_s": overhead[t],
+                        "agents_plan_s": sum(p for w in dist["waves"][t] for p in w["plan_s"] if p is not None),
+                        "sequential_plan_s": sum(s for (m, _), s in seq["plan_s"].items() if m == t),
+                        **{f"projected_{h}_s": v[t] for h, v in projected.items()}}
                        for t in range(cfg.minutes)],
     }
 
@@ -147,9 +155,11 @@ def print_report(rep: dict) -> None:
     hosts = [h for h in rep["projected_minute_seconds_median"]]
     print(f"{c['taxis']} agent processes, {c['scenario']}, {c['minutes']} min from {c['date']} {c['hour']}:00, {c['policy']}; "
           f"decisions {'identical' if rep['same_decisions'] else 'DIFFERENT'} ({rep['fallbacks']} fallbacks)")
-    print(f"  {'t':>3} {'free':>4} {'waves':>5} {'distributed':>11} {'sequential':>10} " + " ".join(f"{'on ' + h:>13}" for h in hosts))
+    print(f"  {'t':>3} {'free':>4} {'waves':>5} {'distributed':>11} {'sequential':>10} {'agents plan':>11} {'seq. plan':>9} "
+          + " ".join(f"{'on ' + h:>13}" for h in hosts))
     for row in rep["per_minute"]:
         print(f"  {row['t']:>3} {row['free']:>4} {row['critical_path']:>5} {row['distributed_s']:>10.3f}s {row['sequential_s']:>9.3f}s "
+              f"{row['agents_plan_s']:>10.3f}s {row['sequential_plan_s']:>8.3f}s "
               + " ".join(f"{row[f'projected_{h}_s']:>12.3f}s" for h in hosts))
     ratio = m["ratio"]
     print(f"  median minute: distributed {m['distributed_median']:.3f} s, sequential in-process {m['sequential_in_process_median']:.3f} s, "
@@ -166,12 +176,13 @@ def print_report(rep: dict) -> None:
 
 def add_parser(bsub: argparse._SubParsersAction) -> None:
     from bus.session import add_security_args
-    from coordinator.fleet import _fleet_args
+    from coordinator.fleet import _fleet_args, threads_arg
 
     f = bsub.add_parser("fleet", help="the distributed runtime against sequential in-process turns, side by side: decisions, "
                                       "minute times, agents' memory, readiness, traffic, critical paths and projections")
     _fleet_args(f, taxis=100, minutes=20, samples=None)
     f.add_argument("--hosts", nargs="+", type=int, default=[4, 10], help="host counts to project the minute for (default: 4 10)")
+    threads_arg(f)
     add_security_args(f)
     f.set_defaults(func=bench_fleet)
 
@@ -190,9 +201,9 @@ def bench_fleet(args: argparse.Namespace) -> int:
         warn_insecure()
     print(f"bench fleet: {cfg.taxis} agent processes over a loopback router, then the same instance in-process", flush=True)
     sampler = PssSampler()
-    dist = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs, watch=sampler)
+    dist = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs, watch=sampler, agent_threads=args.threads)
     seq = sequential_in_process(cfg)
-    rep = fleet_report(cfg, dist, seq, sampler.summary(), args.hosts)
+    rep = fleet_report(cfg, dist, seq, sampler.summary(), args.hosts, args.threads)
     print_report(rep)
     if args.json:
         Path(args.json).write_text(json.dumps(rep, indent=1))

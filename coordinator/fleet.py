@@ -14,6 +14,7 @@ the two runs' decisions are compared.
 
 from __future__ import annotations
 
+import argparse
 import json
 import multiprocess as mp
 import sys
@@ -32,6 +33,12 @@ from city.errors import ConfigError, SurgeError
 from coordinator.args import hour, iso_date, positive, rollout_options, scenario_args
 from coordinator.runtime import FleetConfig
 
+#: Kernel threads of each agent a launcher starts (``None``: every core). One thread each, so that
+#: independent turns fill the cores side by side, measured slower at 100 agents on 2 cores (1.3x the
+#: distributed minute; BENCHMARKS, issue 12): most turns wait on a predecessor, and a lone agent then
+#: plans on one core. The option stays for hosts with many cores and many agents.
+AGENT_THREADS: int | None = None
+
 
 def agent_context():  # noqa: ANN201 - a multiprocess context
     """The context that starts agent processes: forked by a fork server that imported :mod:`agents.preload` first.
@@ -46,11 +53,11 @@ def agent_context():  # noqa: ANN201 - a multiprocess context
 
 
 def _agent_entry(index: int, run: str, bus: SessionArgs, join_timeout_s: float, data_dir: str | None = None,
-                 grace_s: float = 30.0) -> None:
+                 grace_s: float = 30.0, threads: int | None = None) -> None:
     from agents.taxi import AgentConfig, agent_main
 
     sys.exit(agent_main(AgentConfig(index=index, run=run, bus=bus, join_timeout_s=join_timeout_s, data_dir=data_dir,
-                                    grace_s=grace_s)))
+                                    grace_s=grace_s, threads=threads)))
 
 
 def _coordinator_entry(cfg: FleetConfig, bus: SessionArgs, result_path: str, run_dir: str | None = None, resume: bool = False) -> None:
@@ -80,7 +87,7 @@ def in_process(cfg: FleetConfig) -> dict:
 
 def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None = None, startup_timeout_s: float = 60.0,
                     watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None,
-                    resume: bool = False) -> dict:
+                    resume: bool = False, agent_threads: int | None = AGENT_THREADS) -> dict:
     """Run ``cfg`` as real processes over a loopback router; the coordinator's result.
 
     ``secure`` runs the bus with mutual TLS and access control, with the
@@ -90,6 +97,7 @@ def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None 
     their memory).  The coordinator checkpoints each minute to ``run_dir``;
     ``resume`` continues the run checkpointed there, with a new router and
     new agents (they hold nothing a snapshot does not give them).
+    ``agent_threads``: each agent's kernel threads (``None``: every core).
     """
     from agents.rollout import warm_up
 
@@ -100,11 +108,13 @@ def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None 
             make_certs(certs, cfg.taxis)
         elif secure and fleet_size(certs) < cfg.taxis:
             raise ConfigError(f"--certs {certs}: credentials for {fleet_size(certs)} taxis, the run has {cfg.taxis}")
-        return _launch(cfg, certs if secure else None, str(Path(tmp) / "result.json"), startup_timeout_s, watch, run_dir, resume)
+        return _launch(cfg, certs if secure else None, str(Path(tmp) / "result.json"), startup_timeout_s, watch, run_dir, resume,
+                       agent_threads)
 
 
 def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeout_s: float,
-            watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None, resume: bool = False) -> dict:
+            watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None, resume: bool = False,
+            agent_threads: int | None = None) -> dict:
     ctx = mp.get_context("spawn")
     port = free_tcp_port()
     endpoint = f"{'tcp' if certs is None else 'tls'}/127.0.0.1:{port}"
@@ -129,7 +139,7 @@ def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeo
         procs.append(coord)
         forks = agent_context()
         agents = [forks.Process(target=_agent_entry, args=(i, cfg.run, client.as_identity(taxi_name(i)), cfg.join_timeout_s, None,
-                                                           cfg.grace_s), name=f"surge-agent-{i}") for i in range(cfg.taxis)]
+                                                           cfg.grace_s, agent_threads), name=f"surge-agent-{i}") for i in range(cfg.taxis)]
         launched_at = time.time()
         for p in agents:
             p.start()
@@ -269,7 +279,8 @@ def cmd_fleet(args) -> int:  # noqa: ANN001
         how = (f"secured: mutual TLS and access control, with the credentials in {args.certs}" if args.certs else
                "secured: mutual TLS and access control, with credentials made for this run")
     print(f"starting {roles} and {cfg.taxis} agent processes on loopback, {how}", file=sys.stderr, flush=True)
-    result = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs, run_dir=run_dir, resume=args.resume is not None)
+    result = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs, run_dir=run_dir, resume=args.resume is not None,
+                             agent_threads=args.threads)
     if args.check:
         print("running the same instance in-process to compare decisions", file=sys.stderr, flush=True)
         ref = in_process(cfg)
@@ -364,7 +375,7 @@ def cmd_agents(args) -> int:  # noqa: ANN001
     warm_up()  # compile once here, not in every agent at once
     ctx = agent_context()
     procs = [ctx.Process(target=_agent_entry, args=(i, args.run, bus.as_identity(taxi_name(i)), args.join_timeout, args.data,
-                                                    args.grace), name=f"surge-agent-{i}") for i in ids]
+                                                    args.grace, args.threads), name=f"surge-agent-{i}") for i in ids]
     print(f"starting {len(procs)} agent processes for run {args.run!r}", file=sys.stderr, flush=True)
     for p in procs:
         p.start()
@@ -400,6 +411,25 @@ def cmd_certs(args) -> int:  # noqa: ANN001
     return 0
 
 
+def threads_arg(p) -> None:  # noqa: ANN001
+    """``--agent-threads``: what a host running many agents gives each one's kernel."""
+    p.add_argument("--agent-threads", dest="threads", type=_threads, default=AGENT_THREADS, metavar="N",
+                   help="rollout kernel threads of each agent process (default 'all': every core); fewer let agents on one "
+                        "host plan side by side; decisions do not depend on it")
+
+
+def _threads(text: str) -> int | None:
+    if text == "all":
+        return None
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: a positive number of threads, or 'all'")
+    return n
+
+
 def add_parsers(sub) -> None:  # noqa: ANN001
     from bus.session import add_security_args, add_session_args
 
@@ -407,6 +437,7 @@ def add_parsers(sub) -> None:  # noqa: ANN001
     _fleet_args(p, taxis=8, minutes=20, samples=None)
     _grace_arg(p)
     p.add_argument("--check", action="store_true", help="also run the instance in-process and compare the decisions")
+    threads_arg(p)
     _checkpoint_args(p, "fleet")
     add_security_args(p)
     p.set_defaults(func=cmd_fleet)
@@ -438,5 +469,6 @@ def add_parsers(sub) -> None:  # noqa: ANN001
     a.add_argument("--ids", required=True, help="taxi indices to run here, e.g. 0-49 or 0-3,8")
     a.add_argument("--join-timeout", type=float, default=120.0, help="seconds to wait for the coordinator")
     a.add_argument("--data", default=None, help="this host's copy of the data directory, if not at the coordinator's path")
+    threads_arg(a)
     _grace_arg(a)
     a.set_defaults(func=cmd_agents)

@@ -3,10 +3,11 @@
 Each minute it publishes the state (a delta, with the minute's base
 controls) and, at each hour, the forecast sector by sector (unless a
 predictor service does; it answers a taxi's query for a sector it missed
-either way); then it releases the free taxis' turns in dependency waves (:func:`agents.waves.plan_waves`, the same graph
-the in-process policy plans by): every agent of a wave gets its turn at
-once, with the committed controls of the predecessors it depends on, and
-the next wave starts when the wave's controls are committed.  A
+either way); then it releases the free taxis' turns by their dependency
+graph (:func:`agents.waves.plan_waves`, the same graph the in-process policy
+plans by): an agent gets its turn, with the committed controls of the
+predecessors it depends on, as soon as those have committed, so no agent
+waits for a wave's slowest member it does not depend on.  A
 silent agent (its liveliness token gone, or past the deadline) gets the base
 policy's control for that minute, which is what the in-process rollout
 assumes for the agents after the decider, and the run goes on.  A restarted
@@ -313,25 +314,7 @@ class Coordinator:
             previous = np.asarray(obs.req_index)
             u = base.copy()
             waves = plan_waves(self.city, obs, self.rollout.prune)
-            tally.waves.append([])
-            for group in waves.groups():
-                wave_t0 = time.perf_counter()
-                got = self._turns(inbox, turn_pub, t, group.tolist(), waves, u)
-                for agent in group.tolist():
-                    c = got.get(agent)
-                    if c is None:
-                        fallbacks[agent] += 1
-                        tally.fallen.append([t, agent])
-                        commit = Control(t=t, agent=agent, control=int(base[agent]), by="base")
-                    else:
-                        u[agent] = c.control
-                        planned[agent] += 1
-                        plan_s.append(c.plan_s)
-                        rss[agent] = max(rss[agent], c.rss_mb)
-                        commit = c
-                    commit_pub[agent].put(commit.encode())
-                tally.waves[-1].append({"seconds": time.perf_counter() - wave_t0, "agents": group.tolist(),
-                                        "plan_s": [got[a].plan_s if a in got else None for a in group.tolist()]})
+            tally.waves.append(self._turns(inbox, turn_pub, commit_pub, t, waves, base, u))
             controls[t] = u
             costs.append(self.sim.step(u))
             step_s.append(time.perf_counter() - t0)
@@ -432,54 +415,113 @@ class Coordinator:
             self.waiting.discard(c.agent)
             self.arrived[c.agent] = c
 
-    def _turns(self, inbox: Inbox, pubs: dict, t: int, group: list[int], waves: Waves, u: np.ndarray) -> dict[int, Control]:
-        """Give one wave's agents their turns at once and wait for their controls until the deadline or their departure.
+    def _turns(self, inbox: Inbox, pubs: dict, commit_pubs: dict, t: int, waves: Waves, base: np.ndarray, u: np.ndarray) -> list[dict]:
+        """Play minute ``t``'s turns: each agent's goes out as soon as the predecessors it depends on have committed.
 
-        Each turn carries the committed controls ``u`` of the agent's
-        dependencies, all in earlier waves.  Suspect agents' turns are sent
-        but not waited for.  A departure that turns out to be a partition
-        pauses the clock, and the wave's unanswered turns go out again once
-        the agents are back; they also go out again every
+        No wave waits for the slowest agent of the one before: an agent is
+        released when its own ``depends`` are in ``u``, with their controls,
+        and its control is committed the moment it comes, which may release
+        others.  The decisions are those of strictly sequential turns, since
+        an agent's costs depend only on its ``depends`` (:mod:`agents.waves`).
+        Suspect agents' turns are sent but not waited for.  A departure that
+        turns out to be a partition pauses the clock, and the unanswered turns
+        go out again once the agents are back; they also go out again every
         :data:`~coordinator.faults.RESEND_S` seconds, and an agent answers a
-        turn it has planned with the control it sent.  The controls that
-        came, by agent; the missing ones get the base control.
+        turn it has planned with the control it sent.  An agent that is gone,
+        suspect or past its deadline gets the base control.
+
+        Returns the minute's waves for the report: each wave's agents, their
+        planning seconds, and the seconds by which the wave's last commit
+        came after the waves before it (the minute's time in turns, split so
+        that the waves' seconds add up to it).
         """
-        health = self.health
-        depends = dict(zip(waves.agents.tolist(), waves.depends))
-        turns = {a: Turn(t=t, agent=a, deps=depends[a], controls=u[depends[a]]).encode() for a in group}
-        if health.partitioned() or not set(group) <= health.alive:
-            self._partition(inbox, t)  # a wave is not released into a partition
-        self.arrived = {}
-        self.waiting = {a for a in group if a in health.alive}
-        for a in sorted(self.waiting):
-            pubs[a].put(turns[a])
-        self.waiting -= health.suspect
-        sent = time.monotonic()
-        deadline = sent + self.cfg.deadline_s
-        while self.waiting:
-            if not self.waiting <= health.alive:
+        health, tally = self.health, self.tally
+        agents = waves.agents.tolist()
+        depends = dict(zip(agents, waves.depends))
+        blocking = {a: set(depends[a].tolist()) for a in agents}
+        dependents: dict[int, list[int]] = {a: [] for a in agents}
+        for a in agents:
+            for d in blocking[a]:
+                dependents[d].append(a)
+        ready = [a for a in agents if not blocking[a]]
+        turns: dict[int, bytes] = {}
+        sent: dict[int, float] = {}
+        deadline: dict[int, float] = {}
+        done: dict[int, float] = {}
+        plan_s: dict[int, float | None] = {}
+        self.arrived, self.waiting = {}, set()
+        t0 = time.perf_counter()
+
+        def commit(agent: int, c: Control | None) -> None:
+            if c is None:
+                tally.fallbacks[agent] += 1
+                tally.fallen.append([t, agent])
+                c = Control(t=t, agent=agent, control=int(base[agent]), by="base")
+            else:
+                u[agent] = c.control
+                tally.planned[agent] += 1
+                tally.plan_s.append(c.plan_s)
+                tally.rss[agent] = max(tally.rss[agent], c.rss_mb)
+            commit_pubs[agent].put(c.encode())
+            done[agent], plan_s[agent] = time.perf_counter(), None if c.by == "base" else c.plan_s
+            self.waiting.discard(agent)
+            for j in dependents[agent]:
+                blocking[j].discard(agent)
+                if not blocking[j]:
+                    ready.append(j)
+
+        while ready or self.waiting:
+            if ready:
+                if health.partitioned() or not set(ready) <= health.alive:
+                    self._partition(inbox, t)  # no turn is released into a partition
+                release, ready[:] = sorted(ready), []
+                now = time.monotonic()
+                for a in release:
+                    if a not in health.alive:
+                        commit(a, None)
+                        continue
+                    turns[a] = Turn(t=t, agent=a, deps=depends[a], controls=u[depends[a]]).encode()
+                    pubs[a].put(turns[a])
+                    if a in health.suspect:
+                        commit(a, None)
+                    else:
+                        self.waiting.add(a)
+                        sent[a], deadline[a] = now, now + self.cfg.deadline_s
+            elif not self.waiting <= health.alive:
                 healed = self._partition(inbox, t)
                 gone = self.waiting - health.alive
                 if gone:
                     log(f"minute {t}: {agents_text(gone)} gone; base control used")
-                    self.waiting -= gone
+                    for a in sorted(gone):
+                        commit(a, None)
                 if healed:
+                    now = time.monotonic()
                     for a in sorted(self.waiting):
                         pubs[a].put(turns[a])
-                    sent = time.monotonic()
-                    deadline = sent + self.cfg.deadline_s
-                continue
-            now = time.monotonic()
-            if now >= deadline:
-                health.missed(self.waiting, t, self.cfg.deadline_s)
-                self.waiting = set()  # a late control is stale, not this wave's
-                break
-            if now - sent >= RESEND_S:
-                for a in sorted(self.waiting):
+                        sent[a], deadline[a] = now, now + self.cfg.deadline_s
+            else:
+                now = time.monotonic()
+                late = {a for a in self.waiting if now >= deadline[a]}
+                if late:
+                    health.missed(late, t, self.cfg.deadline_s)
+                    for a in sorted(late):
+                        commit(a, None)  # a late control is stale, not this minute's
+                    continue
+                for a in sorted(a for a in self.waiting if now - sent[a] >= RESEND_S):
                     pubs[a].put(turns[a])
-                sent = now
-            self._receive(inbox, min(deadline - now, sent + RESEND_S - now))
-        return self.arrived
+                    sent[a] = now
+                until = min(min(deadline[a] for a in self.waiting), min(sent[a] for a in self.waiting) + RESEND_S)
+                self._receive(inbox, max(0.0, until - now))
+            for a in sorted(self.arrived):
+                commit(a, self.arrived[a])
+            self.arrived = {}
+        out, before = [], t0
+        for group in waves.groups():
+            members = group.tolist()
+            end = max(before, *(done[a] for a in members))
+            out.append({"seconds": end - before, "agents": members, "plan_s": [plan_s[a] for a in members]})
+            before = end
+        return out
 
     def _partition(self, inbox: Inbox, t: int) -> bool:
         """Whether the fleet is partitioned, after letting a burst of departures arrive; if so, wait until it heals.

@@ -56,7 +56,8 @@ def test_bad_options_give_one_line_and_exit_2(args: list[str], message: str, cap
 
 
 @pytest.mark.parametrize("args", [["evaluate", "--hours", "25"], ["evaluate", "--seeds", "0"], ["evaluate", "--date", "2022-13-01"],
-                                  ["predictor", "train", "--out", "unused", "--window", "2"]])
+                                  ["predictor", "train", "--out", "unused", "--window", "2"], ["fleet", "--agent-threads", "0"],
+                                  ["agents", "--ids", "0", "--agent-threads", "two"]])
 def test_bad_flag_values_are_rejected_by_argparse(args: list[str]) -> None:
     proc = run_cli(*args)
     assert proc.returncode == 2

@@ -25,16 +25,18 @@ pytestmark = pytest.mark.usefixtures("compiled_kernels")
 
 
 @pytest.mark.parametrize(
-    ("policy", "options", "predictor", "secure"),
-    [("surge", {"forecast": "true-rate", "samples": 100}, True, True), ("garces2023", {"samples": 50, "horizon": 5}, False, False)],
+    ("policy", "options", "predictor", "secure", "threads"),
+    [("surge", {"forecast": "true-rate", "samples": 100}, True, True, None), ("garces2023", {"samples": 50, "horizon": 5}, False, False, 1)],
 )
-def test_distributed_run_makes_the_in_process_decisions(policy: str, options: dict, predictor: bool, secure: bool) -> None:
+def test_distributed_run_makes_the_in_process_decisions(policy: str, options: dict, predictor: bool, secure: bool,
+                                                        threads: int | None) -> None:
     """surge takes its forecasts from a predictor service process over mutual TLS and access control;
-    garces2023 from the coordinator, on an insecure bus.  Turns go out in dependency waves, and the
-    in-process reference plans strictly one agent after another."""
+    garces2023 from the coordinator, on an insecure bus, its agents planning on one kernel thread each.
+    Turns go out as their dependencies commit, and the in-process reference plans strictly one agent
+    after another with every core."""
     cfg = FleetConfig(run=f"same-{policy}", taxis=3, minutes=8, policy=policy, options=options, deadline_s=120,
                       join_timeout_s=300, predictor=predictor)
-    dist = run_local_fleet(cfg, secure=secure)
+    dist = run_local_fleet(cfg, secure=secure, agent_threads=threads)
     ref = in_process(cfg)
     assert dist["secured"] is secure
     assert dist["fallbacks"] == 0 and dist["agents_exit_codes"] == [0, 0, 0]
