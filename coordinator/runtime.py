@@ -470,10 +470,17 @@ class Coordinator:
                 if not blocking[j]:
                     ready.append(j)
 
+        def again(agents: set[int]) -> None:  # after a partition healed: what was sent meanwhile is lost, and the clock did not run
+            now = time.monotonic()
+            for a in sorted(agents):
+                pubs[a].put(turns[a])
+                sent[a], deadline[a] = now, now + self.cfg.deadline_s
+
         while ready or self.waiting:
             if ready:
-                if health.partitioned() or not set(ready) <= health.alive:
-                    self._partition(inbox, t)  # no turn is released into a partition
+                # No turn is released into a partition: the clock waits for it to heal.
+                if (health.partitioned() or not set(ready) <= health.alive) and self._partition(inbox, t):
+                    again(self.waiting)
                 release, ready[:] = sorted(ready), []
                 now = time.monotonic()
                 for a in release:
@@ -495,10 +502,7 @@ class Coordinator:
                     for a in sorted(gone):
                         commit(a, None)
                 if healed:
-                    now = time.monotonic()
-                    for a in sorted(self.waiting):
-                        pubs[a].put(turns[a])
-                        sent[a], deadline[a] = now, now + self.cfg.deadline_s
+                    again(self.waiting)
             else:
                 now = time.monotonic()
                 late = {a for a in self.waiting if now >= deadline[a]}
