@@ -33,12 +33,6 @@ from city.errors import ConfigError, SurgeError
 from coordinator.args import hour, iso_date, positive, rollout_options, scenario_args
 from coordinator.runtime import FleetConfig
 
-#: Kernel threads of each agent a launcher starts (``None``: every core). One thread each, so that
-#: independent turns fill the cores side by side, measured slower at 100 agents on 2 cores (1.3x the
-#: distributed minute; BENCHMARKS, issue 12): most turns wait on a predecessor, and a lone agent then
-#: plans on one core. The option stays for hosts with many cores and many agents.
-AGENT_THREADS: int | None = None
-
 
 def agent_context():  # noqa: ANN201 - a multiprocess context
     """The context that starts agent processes: forked by a fork server that imported :mod:`agents.preload` first.
@@ -87,7 +81,7 @@ def in_process(cfg: FleetConfig) -> dict:
 
 def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None = None, startup_timeout_s: float = 60.0,
                     watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None,
-                    resume: bool = False, agent_threads: int | None = AGENT_THREADS) -> dict:
+                    resume: bool = False, agent_threads: int | None = None) -> dict:
     """Run ``cfg`` as real processes over a loopback router; the coordinator's result.
 
     ``secure`` runs the bus with mutual TLS and access control, with the
@@ -412,8 +406,14 @@ def cmd_certs(args) -> int:  # noqa: ANN001
 
 
 def threads_arg(p) -> None:  # noqa: ANN001
-    """``--agent-threads``: what a host running many agents gives each one's kernel."""
-    p.add_argument("--agent-threads", dest="threads", type=_threads, default=AGENT_THREADS, metavar="N",
+    """``--agent-threads``: what a host running many agents gives each one's kernel.
+
+    The default is every core. One thread each, so that independent turns fill
+    the cores side by side, was measured slower at 100 agents on 2 cores (1.3x
+    the distributed minute; BENCHMARKS, issue 12): most turns wait on a
+    predecessor, and a lone agent then plans on one core.
+    """
+    p.add_argument("--agent-threads", dest="threads", type=_threads, default=None, metavar="N",
                    help="rollout kernel threads of each agent process (default 'all': every core); fewer let agents on one "
                         "host plan side by side; decisions do not depend on it")
 
