@@ -55,6 +55,14 @@ class Waves:
         """Number of waves: the longest chain of agents that must plan one after another."""
         return int(self.wave.max()) + 1 if self.wave.size else 0
 
+    def dependents(self) -> dict[int, list[int]]:
+        """For each agent, the later agents that depend on it: the graph read forward, to release turns as commits come."""
+        out: dict[int, list[int]] = {int(a): [] for a in self.agents}
+        for a, deps in zip(self.agents.tolist(), self.depends):
+            for d in deps.tolist():
+                out[d].append(a)
+        return out
+
     def groups(self) -> list[np.ndarray]:
         """The agents of each wave, in turn order within a wave."""
         return [self.agents[self.wave == w] for w in range(self.critical_path)]

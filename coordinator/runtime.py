@@ -439,10 +439,7 @@ class Coordinator:
         agents = waves.agents.tolist()
         depends = dict(zip(agents, waves.depends))
         blocking = {a: set(depends[a].tolist()) for a in agents}
-        dependents: dict[int, list[int]] = {a: [] for a in agents}
-        for a in agents:
-            for d in blocking[a]:
-                dependents[d].append(a)
+        dependents = waves.dependents()
         ready = [a for a in agents if not blocking[a]]
         turns: dict[int, bytes] = {}
         sent: dict[int, float] = {}
