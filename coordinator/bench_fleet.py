@@ -16,7 +16,11 @@ in-process with strictly sequential turns, and reports:
   for the same agents on more hosts like this one
   (:func:`coordinator.metrics.project_minutes`): each wave's measured time
   split by the busiest host's share of its agents, never below its slowest
-  agent planning alone in the sequential run.
+  agent planning alone in the sequential run;
+- with ``--restart-router-after M``, the router killed once minute ``M`` is
+  checkpointed and started again: how long the clock paused for the
+  partition, how long the minute it hit took, and whether the decisions
+  still equal the in-process ones.
 
 It prints and writes JSON; it asserts nothing.
 """
@@ -113,7 +117,16 @@ def sequential_in_process(cfg: FleetConfig) -> dict:
     return {"decisions_sha256": decisions_hash(controls), "minute_seconds": minute_s, "plan_s": plan_s}
 
 
-def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: list[int], agent_threads: int | None = None) -> dict:
+def restart_report(dist: dict, restart: dict) -> dict:
+    """The router drill's figures: the partitions the coordinator paused for, and the wall time of each minute they hit."""
+    parts = dist["partitions"]
+    return {**restart, "partitions": parts, "paused_s": sum(p["paused_s"] for p in parts),
+            "hit_minute_seconds": [dist["minute_seconds"][p["minute"]] for p in parts],
+            "router_away_s": (restart["restarted_at"] - restart["killed_at"]) if restart["killed_at"] else None}
+
+
+def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: list[int], agent_threads: int | None = None,
+                 restart: dict | None = None) -> dict:
     """The benchmark's figures from the two runs (see the module docstring).
 
     Per minute, the agents' own planning seconds (summed) stand beside the
@@ -140,6 +153,7 @@ def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: l
         "critical_path": dist["critical_path"],
         "free_per_minute": dist["free_per_minute"],
         "projected_minute_seconds_median": {h: median(v) for h, v in projected.items()},
+        "router_restart": restart_report(dist, restart) if restart is not None else None,
         "per_minute": [{"t": t, "free": dist["free_per_minute"][t], "critical_path": dist["critical_path"][t],
                         "distributed_s": dist["minute_seconds"][t], "sequential_s": seq["minute_seconds"][t],
                         "outside_waves_s": overhead[t],
@@ -172,6 +186,15 @@ def print_report(rep: dict) -> None:
           f"and {tr['bytes_per_minute'] / 1024:.1f} KiB per minute")
     print("  projected median minute: " + ", ".join(f"{h} hosts {v:.3f} s" if h.isdigit() else f"{h} {v:.3f} s"
                                                      for h, v in rep["projected_minute_seconds_median"].items()))
+    r = rep["router_restart"]
+    if r is None:
+        return
+    if r["killed_at"] is None:
+        print(f"  router restart: the run ended before minute {r['after_minute']} was checkpointed; the router was not killed")
+        return
+    hits = ", ".join(f"the clock paused {p['paused_s']:.1f} s in minute {p['minute'] + 1} ({p['tokens_gone']} tokens gone; the minute "
+                     f"took {s:.1f} s)" for p, s in zip(r["partitions"], r["hit_minute_seconds"])) or "the coordinator saw no partition"
+    print(f"  router killed after minute {r['after_minute']} and back {r['router_away_s']:.1f} s later: {hits}")
 
 
 def add_parser(bsub: argparse._SubParsersAction) -> None:
@@ -182,6 +205,10 @@ def add_parser(bsub: argparse._SubParsersAction) -> None:
                                       "minute times, agents' memory, readiness, traffic, critical paths and projections")
     _fleet_args(f, taxis=100, minutes=20, samples=None)
     f.add_argument("--hosts", nargs="+", type=int, default=[4, 10], help="host counts to project the minute for (default: 4 10)")
+    f.add_argument("--restart-router-after", type=int, default=None, metavar="MINUTE",
+                   help="kill the router once this minute is checkpointed and start it again: the clock's pause is reported")
+    f.add_argument("--router-down", type=float, default=1.0, metavar="SECONDS",
+                   help="seconds the router stays down with --restart-router-after (default 1)")
     threads_arg(f)
     add_security_args(f)
     f.set_defaults(func=bench_fleet)
@@ -190,20 +217,28 @@ def add_parser(bsub: argparse._SubParsersAction) -> None:
 def bench_fleet(args: argparse.Namespace) -> int:
     from bus.session import warn_insecure
     from city.errors import ConfigError
-    from coordinator.fleet import fleet_config, run_local_fleet
+    from coordinator.fleet import RouterRestart, fleet_config, run_local_fleet
 
     cfg = fleet_config(args)
     if args.certs is not None and args.insecure:
         raise ConfigError("--certs and --insecure: choose one")
     if any(h < 1 for h in args.hosts):
         raise ConfigError(f"--hosts {' '.join(map(str, args.hosts))}: host counts must be at least 1")
+    after = args.restart_router_after
+    if after is not None and not 1 <= after < cfg.minutes:
+        raise ConfigError(f"--restart-router-after {after}: the run has minutes 1 to {cfg.minutes - 1} to restart the router after")
+    if args.router_down < 0:
+        raise ConfigError(f"--router-down {args.router_down:g}: seconds must not be negative")
+    restart = RouterRestart(after, args.router_down) if after is not None else None
     if args.insecure:
         warn_insecure()
     print(f"bench fleet: {cfg.taxis} agent processes over a loopback router, then the same instance in-process", flush=True)
     sampler = PssSampler()
-    dist = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs, watch=sampler, agent_threads=args.threads)
+    dist = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs, watch=sampler, agent_threads=args.threads,
+                           restart=restart)
     seq = sequential_in_process(cfg)
-    rep = fleet_report(cfg, dist, seq, sampler.summary(), args.hosts, args.threads)
+    rep = fleet_report(cfg, dist, seq, sampler.summary(), args.hosts, args.threads,
+                       restart.summary() if restart is not None else None)
     print_report(rep)
     if args.json:
         Path(args.json).write_text(json.dumps(rep, indent=1))

@@ -27,7 +27,7 @@ from city.sim import FleetSim, FleetState
 from coordinator.metrics import Traffic
 
 CHECKPOINT = "checkpoint.json"
-VERSION = 1
+VERSION = 2
 
 
 @dataclass
@@ -47,6 +47,8 @@ class Tally:
     #: Per minute, its dependency waves as the result reports them (agents, seconds, agents' planning seconds).
     waves: list[list[dict]] = field(default_factory=list)
     traffic: Traffic = field(default_factory=Traffic)
+    #: Each partition the clock paused for: its minute, the tokens gone, the seconds paused.
+    partitions: list[dict] = field(default_factory=list)
 
     @staticmethod
     def fresh(minutes: int, taxis: int) -> Tally:
@@ -65,7 +67,7 @@ def save(run_dir: Path, config: dict, sim: FleetSim, tally: Tally) -> Path:
         "tally": {"controls": tally.controls[: s.t].tolist(), "costs": tally.costs, "step_s": tally.step_s,
                   "plan_s": tally.plan_s, "planned": tally.planned.tolist(), "fallbacks": tally.fallbacks.tolist(),
                   "rss": tally.rss.tolist(), "stale": tally.stale, "fallen": tally.fallen, "waves": tally.waves,
-                  "traffic": asdict(tally.traffic)},
+                  "traffic": asdict(tally.traffic), "partitions": tally.partitions},
     }
     run_dir.mkdir(parents=True, exist_ok=True)
     path = run_dir / CHECKPOINT
@@ -73,6 +75,11 @@ def save(run_dir: Path, config: dict, sim: FleetSim, tally: Tally) -> Path:
     tmp.write_text(json.dumps(doc))
     os.replace(tmp, path)
     return path
+
+
+def minutes_done(run_dir: Path) -> int:
+    """How many minutes the checkpoint in ``run_dir`` holds (0 before the first): for a watcher of a run."""
+    return int(_read(run_dir)["t"]) if (run_dir / CHECKPOINT).is_file() else 0
 
 
 def read_config(run_dir: Path) -> dict:
@@ -95,7 +102,8 @@ def restore(run_dir: Path, sim: FleetSim, minutes: int) -> Tally:
                       plan_s=[float(x) for x in tal["plan_s"]], planned=np.asarray(tal["planned"], dtype=np.int64),
                       fallbacks=np.asarray(tal["fallbacks"], dtype=np.int64), rss=np.asarray(tal["rss"], dtype=float),
                       stale=int(tal["stale"]), fallen=[[int(t), int(a)] for t, a in tal["fallen"]], waves=list(tal["waves"]),
-                      traffic=Traffic(**{k: int(v) for k, v in tal["traffic"].items()}))
+                      traffic=Traffic(**{k: int(v) for k, v in tal["traffic"].items()}),
+                      partitions=[dict(p) for p in tal["partitions"]])
     except (AttributeError, KeyError, TypeError, ValueError) as exc:
         raise DataError(f"not a checkpoint of this version ({type(exc).__name__}: {exc})", path=path) from None
     if state.pos.shape != (taxis,) or state.tau.shape != (taxis,) or state.dest.shape != (taxis,):

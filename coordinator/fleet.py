@@ -21,6 +21,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -79,9 +80,33 @@ def in_process(cfg: FleetConfig) -> dict:
             "step_seconds": {"median": float(np.median(res.plan_seconds)), "max": float(np.max(res.plan_seconds))}}
 
 
+@dataclass
+class RouterRestart:
+    """Kill the run's router once the coordinator has checkpointed minute ``after_minute``, and start it again ``down_s`` later.
+
+    A fault drill for a benchmark: every token vanishes at once, so the
+    coordinator must take it for a partition and pause the clock.  The
+    launcher fills in when the router went and came back (epoch seconds).
+    """
+
+    after_minute: int
+    down_s: float = 1.0
+    killed_at: float | None = None
+    restarted_at: float | None = None
+
+    def due(self, run_dir: str) -> bool:
+        from coordinator.checkpoint import minutes_done
+
+        return self.killed_at is None and minutes_done(Path(run_dir)) >= self.after_minute
+
+    def summary(self) -> dict:
+        return {"after_minute": self.after_minute, "down_s": self.down_s, "killed_at": self.killed_at,
+                "restarted_at": self.restarted_at}
+
+
 def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None = None, startup_timeout_s: float = 60.0,
                     watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None,
-                    resume: bool = False, agent_threads: int | None = None) -> dict:
+                    resume: bool = False, agent_threads: int | None = None, restart: RouterRestart | None = None) -> dict:
     """Run ``cfg`` as real processes over a loopback router; the coordinator's result.
 
     ``secure`` runs the bus with mutual TLS and access control, with the
@@ -92,6 +117,8 @@ def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None 
     ``resume`` continues the run checkpointed there, with a new router and
     new agents (they hold nothing a snapshot does not give them).
     ``agent_threads``: each agent's kernel threads (``None``: every core).
+    ``restart`` kills and restarts the router mid-run (it needs ``run_dir``,
+    whose checkpoint tells the minute).
     """
     from agents.rollout import warm_up
 
@@ -102,22 +129,29 @@ def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None 
             make_certs(certs, cfg.taxis)
         elif secure and fleet_size(certs) < cfg.taxis:
             raise ConfigError(f"--certs {certs}: credentials for {fleet_size(certs)} taxis, the run has {cfg.taxis}")
+        if restart is not None and run_dir is None:
+            run_dir = str(Path(tmp) / "run")
         return _launch(cfg, certs if secure else None, str(Path(tmp) / "result.json"), startup_timeout_s, watch, run_dir, resume,
-                       agent_threads)
+                       agent_threads, restart)
 
 
 def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeout_s: float,
             watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None, resume: bool = False,
-            agent_threads: int | None = None) -> dict:
+            agent_threads: int | None = None, restart: RouterRestart | None = None) -> dict:
     ctx = mp.get_context("spawn")
     port = free_tcp_port()
     endpoint = f"{'tcp' if certs is None else 'tls'}/127.0.0.1:{port}"
     client = SessionArgs(mode="client", connect=[endpoint], certs=certs)
     procs: list = []
     router_args = SessionArgs(mode="router", listen=[endpoint], certs=certs, identity="router", run=cfg.run)
-    router = ctx.Process(target=router_main, args=(router_args,), name="surge-router")
-    router.start()
-    procs.append(router)
+
+    def start_router():  # noqa: ANN202 - a multiprocess Process
+        p = ctx.Process(target=router_main, args=(router_args,), name="surge-router")
+        p.start()
+        procs.append(p)
+        return p
+
+    router = start_router()
     try:
         wait_for_tcp("127.0.0.1", port, startup_timeout_s)
         if cfg.predictor:
@@ -142,6 +176,14 @@ def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeo
             coord.join(1.0)
             if watch is not None:
                 watch([p.pid for p in agents if p.pid is not None])
+            if restart is not None and run_dir is not None and restart.due(run_dir):
+                router.kill()
+                router.join(10)
+                restart.killed_at = time.time()
+                time.sleep(restart.down_s)
+                router = start_router()
+                wait_for_tcp("127.0.0.1", port, startup_timeout_s)
+                restart.restarted_at = time.time()
         if coord.exitcode != 0:
             raise ConfigError(f"the coordinator failed (exit code {coord.exitcode}); see its message above")
         result = json.loads(Path(result_path).read_text())

@@ -355,6 +355,7 @@ class Coordinator:
             "joined_at": joined_at,
             "traffic": tally.traffic.summary(cfg.minutes),
             "resumed_at_minute": first if first else None,
+            "partitions": tally.partitions,
         }
 
     def _hold_forecast(self, pub: ForecastPublisher | None, hour: int) -> None:
@@ -539,8 +540,8 @@ class Coordinator:
             return False  # single departures, or a fleet worn down one agent at a time: nobody to wait for
         for a in expected:
             health.acked.pop(a, None)  # the acks that count are those of the agents' snapshots after the partition
-        timeout = self.cfg.partition_timeout_s
-        log(f"minute {t}: partition: {self.cfg.taxis - len(health.alive)} of {self.cfg.taxis} agents' tokens are gone; "
+        timeout, gone = self.cfg.partition_timeout_s, self.cfg.taxis - len(health.alive)
+        log(f"minute {t}: partition: {gone} of {self.cfg.taxis} agents' tokens are gone; "
             f"the clock pauses until they return (at most {timeout:g} s)")
         start = time.monotonic()
         acked_by = None
@@ -551,6 +552,7 @@ class Coordinator:
                 acked_by = now + ACK_WAIT_S
             if acked or (acked_by is not None and now >= acked_by):
                 log(f"minute {t}: partition healed after {now - start:.1f} s: {len(health.alive)} agents back; minute {t} goes on")
+                self.tally.partitions.append({"minute": t, "tokens_gone": gone, "paused_s": now - start})
                 return True
             if now - start >= timeout:
                 raise PartitionError(f"run {self.cfg.run!r}: partition at minute {t}: {len(expected & health.alive)} of "

@@ -190,6 +190,30 @@ def test_router_restart_and_coordinator_resume_keep_the_uninterrupted_decisions(
     assert result["total_cost"] == ref["total_cost"]
 
 
+def test_the_router_drill_of_bench_fleet_reports_the_pause_and_keeps_the_decisions(tmp_path: Path) -> None:
+    """`surge bench fleet --restart-router-after`: the launcher kills its own router mid-run and starts it again; the
+    coordinator records the partition it paused for, and the run still makes the in-process decisions."""
+    out = tmp_path / "drill.json"
+    run = subprocess.run([*CLI, "bench", "fleet", "--taxis", "4", "--minutes", "8", "--samples", "20", "--horizon", "4",
+                          "--forecast", "true-rate", "--hosts", "2", "--minute-seconds", "1", "--restart-router-after", "2",
+                          "--json", str(out)], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    rep = json.loads(out.read_text())
+    drill = rep["router_restart"]
+    assert rep["same_decisions"] and rep["fallbacks"] == 0
+    assert drill["killed_at"] < drill["restarted_at"] and drill["router_away_s"] >= 1.0
+    assert len(drill["partitions"]) == 1 and drill["partitions"][0]["tokens_gone"] == 4
+    assert drill["partitions"][0]["minute"] >= 2 and 0 < drill["paused_s"] <= drill["hit_minute_seconds"][0]
+    assert "router killed after minute 2" in run.stdout and "the clock paused" in run.stdout
+
+
+def test_bench_fleet_refuses_a_router_drill_outside_the_run() -> None:
+    run = subprocess.run([*CLI, "bench", "fleet", "--taxis", "2", "--minutes", "3", "--restart-router-after", "3"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode != 0 and "--restart-router-after 3: the run has minutes 1 to 2" in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1
+
+
 def test_an_interrupted_fleet_resumes_from_its_checkpoint(tmp_path: Path) -> None:
     """`surge fleet` SIGTERMed mid-run, then `surge fleet --resume`: a new router and new agents finish the same run."""
     run_dir, out, minutes = tmp_path / "run", tmp_path / "resumed.json", 12
