@@ -177,8 +177,12 @@ def _model_lines(run) -> list[str]:
     return lines
 
 
-def write_report(run, scen, docs: dict, pe: dict | None) -> Path:
-    """Figures and ``REPORT.md`` in ``run.out``; returns the report's path."""
+def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | None = None) -> Path:
+    """Figures and ``REPORT.md`` in ``run.out``; returns the report's path.
+
+    ``status`` (one line per step: instances done of those planned) marks an
+    interim report, written from the results of a run still under way.
+    """
     from coordinator.reproduce import pruning_pairs
 
     out = run.out
@@ -189,6 +193,10 @@ def write_report(run, scen, docs: dict, pe: dict | None) -> Path:
              + "`; protocol: "
              + ", ".join(f"{k}={v}" for k, v in vars(run.protocol).items()) + ".",
              "Every number below is computed from the results files beside this report (`surge.results/1`).", ""]
+    if status:
+        lines += ["## Status: interim", "", "Written with `--report-only` while the protocol is under way. Each table uses the "
+                  "instances finished so far (seeds finished at every hour of their date); `surge reproduce` with the same "
+                  "`--out` resumes the rest and writes the final report.", ""] + [f"- {line}" for line in status] + [""]
     info = ("`surge` with the trained model" if run.forecast == "model"
             else "**no predictor in this protocol: `surge` planned with the true rates, an upper bound, not the paper's comparison**")
     lines += ["## Verdicts on the paper's claims", "",

@@ -293,35 +293,89 @@ def _predictor_eval(run: Run) -> dict | None:
     return json.loads(path.read_text())
 
 
-def reproduce(run: Run, refresh_model: bool = False) -> Path:
-    """Run every step (resuming what is done) and write ``OUT/REPORT.md``; returns its path."""
+def _steps(run: Run, dates: list[str]) -> dict[str, tuple[list[str], tuple[int, ...], int, list[str]]]:
+    """Each evaluation step: its dates, hours, seeds and policy labels."""
+    p = run.protocol
+    ablations = [a for a in ABLATIONS if p.predictor or "forecast=model" not in a]
+    ablations += [label for pair in pruning_pairs(p) for label in pair if label not in MAIN_POLICIES]
+    steps = {"main": ([PAPER_DATE], p.hours, p.seeds, list(MAIN_POLICIES))}
+    if dates:
+        steps["dates"] = (dates, p.other_hours, p.other_seeds, list(MAIN_POLICIES))
+    steps["ablation"] = ([PAPER_DATE], p.ablation_hours, p.ablation_seeds, list(MAIN_POLICIES) + ablations)
+    return steps
+
+
+def instances_done(doc: dict, labels: list[str]) -> int:
+    """How many instances of a results document hold a row of every one of ``labels``."""
+    have: dict[tuple, set] = {}
+    for e in doc["episodes"]:
+        have.setdefault((e["date"], e["hour"], e["seed"]), set()).add(e["policy"])
+    return sum(1 for got in have.values() if set(labels) <= got)
+
+
+def _interim_docs(run: Run, steps: dict) -> tuple[dict, list[str]]:
+    """The results files as they stand, and one status line per step (instances done of those the protocol asks for)."""
+    from coordinator.evaluate import read_results
+
+    docs, status = {}, []
+    for name, (dates, hours, seeds, labels) in steps.items():
+        path = run.out / f"results-{name}.json"
+        planned = len(dates) * len(hours) * seeds
+        if not path.exists():
+            if name == "main":
+                raise ConfigError(f"{path}: no results yet; run `surge reproduce` without --report-only first")
+            docs[name] = {"episodes": [], "config": {"dates": dates}}
+            status.append(f"{name}: 0 of {planned} instances (not started)")
+            continue
+        docs[name] = read_results(path)
+        status.append(f"{name}: {instances_done(docs[name], labels)} of {planned} instances")
+    return docs, status
+
+
+def _save_timings(run: Run) -> None:
+    (run.out / "timings.json").write_text(json.dumps({"this invocation": run.timings, "all invocations": run.summed()}, indent=1))
+
+
+def reproduce(run: Run, refresh_model: bool = False, report_only: bool = False) -> Path:
+    """Run every step (resuming what is done) and write ``OUT/REPORT.md``; returns its path.
+
+    ``report_only`` runs nothing: it writes an interim report from the
+    results files as they stand, which says how far each step has come.
+    """
     from city.scenario import load_scenario
     from coordinator import report_md
 
-    run.out.mkdir(parents=True, exist_ok=True)
     timings = run.out / "timings.json"
     if timings.exists():
         run.earlier = json.loads(timings.read_text()).get("all invocations", {})
     p = run.protocol
     t_all = time.perf_counter()
-    _train(run)
-    _check_model(run, refresh_model)
-    pe = _predictor_eval(run)
-    scen = load_scenario(run.scenario, run.data)
-    docs = {"main": _evaluate(run, "main", [PAPER_DATE], p.hours, p.seeds, list(MAIN_POLICIES))}
-    dates = evening_event_dates(scen.world, p.other_dates)
-    if dates:
-        docs["dates"] = _evaluate(run, "dates", dates, p.other_hours, p.other_seeds, list(MAIN_POLICIES))
-    ablations = [a for a in ABLATIONS if p.predictor or "forecast=model" not in a]
-    ablations += [label for pair in pruning_pairs(p) for label in pair if label not in MAIN_POLICIES]
-    docs["ablation"] = _evaluate(run, "ablation", [PAPER_DATE], p.ablation_hours, p.ablation_seeds, list(MAIN_POLICIES) + ablations,
-                                 borrow=docs["main"])
-    run.say("figures and REPORT.md")
+    status = None
+    if report_only:
+        if p.predictor and not (run.model / "model.json").exists():
+            raise ConfigError(f"{run.model}: no trained predictor; the report's figures plan with it (pass --model)")
+        _check_model(run, refresh=False)
+        path = run.out / "predictor-eval.json"
+        pe = json.loads(path.read_text()) if path.exists() else None
+        scen = load_scenario(run.scenario, run.data)
+        docs, status = _interim_docs(run, _steps(run, evening_event_dates(scen.world, p.other_dates)))
+    else:
+        run.out.mkdir(parents=True, exist_ok=True)
+        _train(run)
+        _check_model(run, refresh_model)
+        pe = _predictor_eval(run)
+        scen = load_scenario(run.scenario, run.data)
+        docs = {}
+        for name, (dates, hours, seeds, labels) in _steps(run, evening_event_dates(scen.world, p.other_dates)).items():
+            docs[name] = _evaluate(run, name, dates, hours, seeds, labels, borrow=docs["main"] if name == "ablation" else None)
+            _save_timings(run)  # a run stopped in a later step keeps this one's time
+    run.say("figures and REPORT.md" + (" (interim)" if status else ""))
     t0 = time.perf_counter()
-    report = report_md.write_report(run, scen, docs, pe)
+    report = report_md.write_report(run, scen, docs, pe, status)
     run.timings["report"] = time.perf_counter() - t0
     run.timings["total"] = time.perf_counter() - t_all
-    timings.write_text(json.dumps({"this invocation": run.timings, "all invocations": run.summed()}, indent=1))
+    if not report_only:
+        _save_timings(run)
     run.say(f"wrote {report} in {run.timings['total']:.0f} s")
     return report
 
@@ -335,6 +389,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--smoke", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--jobs", type=int, default=None, help="worker processes for the evaluations (default: one per core)")
     p.add_argument("--model", default=None, help="reuse this trained predictor directory instead of training OUT/model")
+    p.add_argument("--report-only", action="store_true",
+                   help="run nothing: write OUT/REPORT.md from the results so far, saying how far each step has come")
     p.add_argument("--refresh-model", action="store_true",
                    help="the predictor changed since OUT's results: rerun only the rows that plan with it, keep the rest")
     p.set_defaults(func=cmd_reproduce)
@@ -356,5 +412,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     command = " ".join(["surge reproduce --scenario", args.scenario] + [f if v is True else f"{f} {v}" for f, v in flags if v])
     run = Run(out=Path(args.out), scenario=args.scenario, data=args.data, protocol=replace(protocol, jobs=jobs), model_dir=model,
               command=command)
-    print(reproduce(run, refresh_model=args.refresh_model))
+    if args.report_only and args.refresh_model:
+        raise ConfigError("--report-only runs nothing, so it cannot --refresh-model: choose one")
+    print(reproduce(run, refresh_model=args.refresh_model, report_only=args.report_only))
     return 0

@@ -26,6 +26,22 @@ def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys) -
     assert main(["reproduce", "--smoke", "--out", str(out)]) == 0
     err = capsys.readouterr().err
     assert "main resuming from" in err and "[1/" not in err.split("ablation")[0]  # finished episodes are not rerun
+    assert "main" in json.loads((out / "timings.json").read_text())["all invocations"]
+    (out / "results-ablation.json").unlink()  # as if the run had stopped before its ablations
+    assert main(["reproduce", "--smoke", "--out", str(out), "--report-only"]) == 0
+    err = capsys.readouterr().err
+    assert "[1/" not in err and "(interim)" in err  # nothing ran
+    report = (out / "REPORT.md").read_text()
+    assert "## Status: interim" in report and "- main: 1 of 1 instances" in report
+    assert "- ablation: 0 of 1 instances (not started)" in report and "Table 1" in report
+    assert not (out / "results-ablation.json").exists()
+
+
+def test_report_only_needs_the_main_results(tmp_path: Path, capsys) -> None:  # noqa: ANN001
+    assert main(["reproduce", "--smoke", "--out", str(tmp_path / "empty"), "--report-only"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "results-main.json: no results yet; run `surge reproduce` without --report-only" in err[0]
+    assert not (tmp_path / "empty").exists()
 
 
 def test_results_of_another_predictor_are_refused_or_refreshed(tmp_path: Path) -> None:
