@@ -64,6 +64,7 @@ nearest taxis only).  Independent agents can plan at once
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, ClassVar
@@ -296,18 +297,25 @@ def choose(cands: np.ndarray, costs: np.ndarray) -> int:
     return int(cands[int(np.argmin(totals))])
 
 
-def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int) -> int:
+#: Chunks of samples an agent that shares its host's cores runs, each on the threads its share allows then.
+SHARE_CHUNKS = 4
+
+
+def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Callable[[], int] | None = None) -> int:
     """One agent's rollout control: a pure function of the context, ``committed`` and ``agent``.
 
     A busy agent gets its forced next hop without planning.  With
     ``config.adaptive`` the samples run in batches and candidates are dropped
     on the way (:func:`adaptive_choice`); otherwise the choice is
     :func:`choose` over every sample, whatever exact shortcuts are on.
+    ``threads``, when given, is asked before each of :data:`SHARE_CHUNKS`
+    chunks of samples how many kernel threads to run it on
+    (:class:`agents.cores.CoreShare`); the control does not depend on it.
     """
-    return _plan(ctx, committed, agent, serial=False)
+    return _plan(ctx, committed, agent, serial=False, threads=threads)
 
 
-def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool) -> int:
+def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, threads: Callable[[], int] | None = None) -> int:
     """:func:`plan_agent`; ``serial`` runs the samples in the calling thread without the GIL (same result)."""
     if ctx.obs.tau[agent] > 0:
         return int(ctx.base_controls[agent])
@@ -319,7 +327,14 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool) -> 
     if ctx.config.adaptive is not None:
         # Batches are short: in the calling thread, without the start-up of a parallel region per batch.
         return adaptive_choice(ctx, inp, serial=True)
-    costs, settled = _run(ctx, inp, 0, S, np.ones(n_c, dtype=bool), serial)
+    if threads is None or serial:
+        costs, settled = _run(ctx, inp, 0, S, np.ones(n_c, dtype=bool), serial)
+    else:
+        parts = []
+        for c in range(SHARE_CHUNKS):
+            set_kernel_threads(threads())
+            parts.append(_run(ctx, inp, c * S // SHARE_CHUNKS, (c + 1) * S // SHARE_CHUNKS, np.ones(n_c, dtype=bool)))
+        costs, settled = (np.concatenate(x, axis=1) for x in zip(*parts))
     shadowed = int(settled.sum())
     ctx.stats.add(False, n_c > 1 and shadowed == (n_c - 1) * S, n_c * S - shadowed, shadowed)
     return choose(inp.cands, costs)

@@ -40,8 +40,10 @@ import sys
 import time
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
+from agents.cores import CoreShare
 from agents.rollout import RolloutConfig, StepContext, candidate_controls, plan_agent, prepare_step, set_kernel_threads, warm_up
 from agents.sector_forecasts import AgentForecasts, needed_sectors
 from bus.checks import Bounds, Rejections, check_choice, check_spec, check_state, check_stop, check_turn
@@ -65,8 +67,9 @@ class AgentConfig:
     data_dir: str | None = None
     #: Seconds to wait for a vanished coordinator (a restart, a resume) before leaving.
     grace_s: float = 30.0
-    #: Threads of this agent's rollout kernel (``None``: every core); see :func:`agents.rollout.set_kernel_threads`.
-    threads: int | None = None
+    #: Threads of this agent's rollout kernel: ``"share"`` (the host's cores split among the agents of
+    #: the run planning on it at the time, :mod:`agents.cores`), ``"all"`` (every core) or a number.
+    threads: int | str = "share"
 
 
 class CoordinatorGone(SurgeError):
@@ -113,6 +116,8 @@ class TaxiAgent:
         self.gone_logged = False
         #: Since when the pending turn waits for its state.
         self.stalled: float | None = None
+        #: This host's cores, shared with the run's other agents planning at the same time (``threads="share"``).
+        self.share: CoreShare | None = None
 
     def run(self) -> int:
         """Join the run and plan until it stops; the number of controls this agent planned."""
@@ -146,8 +151,13 @@ class TaxiAgent:
 
     def _warm_up(self) -> None:
         """Load (or build) the compiled kernels before joining, so that a fresh checkout's first turn is not late."""
-        if self.cfg.threads is not None:
-            set_kernel_threads(self.cfg.threads)
+        threads = self.cfg.threads
+        if isinstance(threads, int):
+            set_kernel_threads(threads)
+        elif threads == "share":
+            self.share = CoreShare(self.cfg.run, numba.config.NUMBA_NUM_THREADS)
+        elif threads != "all":
+            raise ConfigError(f"agent threads: {threads!r} is not 'share', 'all' or a number")
         warm_up(self.city, self.rollout)
 
     def _fetch_spec(self, session) -> RunSpec:  # noqa: ANN001
@@ -366,7 +376,11 @@ class TaxiAgent:
             out.put(self.sent.encode())  # a repeated turn, with the same predecessors: the first answer may have been lost
             return
         t0 = time.perf_counter()
-        control = plan_agent(self.context, committed, self.me)
+        if self.share is None:
+            control = plan_agent(self.context, committed, self.me)
+        else:
+            with self.share.planning():
+                control = plan_agent(self.context, committed, self.me, threads=self.share.threads)
         plan_s = time.perf_counter() - t0
         rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         self.sent, self.sent_with = Control(t=turn.t, agent=self.me, control=int(control), plan_s=plan_s, rss_mb=rss_mb), committed

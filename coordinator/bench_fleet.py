@@ -125,7 +125,7 @@ def restart_report(dist: dict, restart: dict) -> dict:
             "router_away_s": (restart["restarted_at"] - restart["killed_at"]) if restart["killed_at"] else None}
 
 
-def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: list[int], agent_threads: int | None = None,
+def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: list[int], agent_threads: int | str = "share",
                  restart: dict | None = None) -> dict:
     """The benchmark's figures from the two runs (see the module docstring).
 

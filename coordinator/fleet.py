@@ -48,7 +48,7 @@ def agent_context():  # noqa: ANN201 - a multiprocess context
 
 
 def _agent_entry(index: int, run: str, bus: SessionArgs, join_timeout_s: float, data_dir: str | None = None,
-                 grace_s: float = 30.0, threads: int | None = None) -> None:
+                 grace_s: float = 30.0, threads: int | str = "share") -> None:
     from agents.taxi import AgentConfig, agent_main
 
     sys.exit(agent_main(AgentConfig(index=index, run=run, bus=bus, join_timeout_s=join_timeout_s, data_dir=data_dir,
@@ -106,7 +106,7 @@ class RouterRestart:
 
 def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None = None, startup_timeout_s: float = 60.0,
                     watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None,
-                    resume: bool = False, agent_threads: int | None = None, restart: RouterRestart | None = None) -> dict:
+                    resume: bool = False, agent_threads: int | str = "share", restart: RouterRestart | None = None) -> dict:
     """Run ``cfg`` as real processes over a loopback router; the coordinator's result.
 
     ``secure`` runs the bus with mutual TLS and access control, with the
@@ -116,7 +116,7 @@ def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None 
     their memory).  The coordinator checkpoints each minute to ``run_dir``;
     ``resume`` continues the run checkpointed there, with a new router and
     new agents (they hold nothing a snapshot does not give them).
-    ``agent_threads``: each agent's kernel threads (``None``: every core).
+    ``agent_threads``: each agent's kernel threads (:attr:`agents.taxi.AgentConfig.threads`).
     ``restart`` kills and restarts the router mid-run (it needs ``run_dir``,
     whose checkpoint tells the minute).
     """
@@ -137,7 +137,7 @@ def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None 
 
 def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeout_s: float,
             watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None, resume: bool = False,
-            agent_threads: int | None = None, restart: RouterRestart | None = None) -> dict:
+            agent_threads: int | str = "share", restart: RouterRestart | None = None) -> dict:
     ctx = mp.get_context("spawn")
     port = free_tcp_port()
     endpoint = f"{'tcp' if certs is None else 'tls'}/127.0.0.1:{port}"
@@ -450,25 +450,27 @@ def cmd_certs(args) -> int:  # noqa: ANN001
 def threads_arg(p) -> None:  # noqa: ANN001
     """``--agent-threads``: what a host running many agents gives each one's kernel.
 
-    The default is every core. One thread each, so that independent turns fill
-    the cores side by side, was measured slower at 100 agents on 2 cores (1.3x
-    the distributed minute; BENCHMARKS, issue 12): most turns wait on a
-    predecessor, and a lone agent then plans on one core.
+    The default, ``share``, splits the host's cores among the agents of the run
+    planning on it at the time (:mod:`agents.cores`): a lone agent plans on
+    every core, and independent turns side by side take one share each. A
+    fixed count was measured at 100 agents on 2 cores (BENCHMARKS, issue 12):
+    one thread each was slower than every core, since most turns wait on a
+    predecessor and a lone agent then plans on one core.
     """
-    p.add_argument("--agent-threads", dest="threads", type=_threads, default=None, metavar="N",
-                   help="rollout kernel threads of each agent process (default 'all': every core); fewer let agents on one "
-                        "host plan side by side; decisions do not depend on it")
+    p.add_argument("--agent-threads", dest="threads", type=_threads, default="share", metavar="N",
+                   help="rollout kernel threads of each agent process: 'share' (default: the host's cores split among the "
+                        "agents planning at the time), 'all' (every core) or a number; decisions do not depend on it")
 
 
-def _threads(text: str) -> int | None:
-    if text == "all":
-        return None
+def _threads(text: str) -> int | str:
+    if text in ("share", "all"):
+        return text
     try:
         n = int(text)
     except ValueError:
         n = 0
     if n < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: a positive number of threads, or 'all'")
+        raise argparse.ArgumentTypeError(f"{text!r}: 'share', 'all' or a positive number of threads")
     return n
 
 

@@ -26,12 +26,13 @@ pytestmark = pytest.mark.usefixtures("compiled_kernels")
 
 @pytest.mark.parametrize(
     ("policy", "options", "predictor", "secure", "threads"),
-    [("surge", {"forecast": "true-rate", "samples": 100}, True, True, None), ("garces2023", {"samples": 50, "horizon": 5}, False, False, 1)],
+    [("surge", {"forecast": "true-rate", "samples": 100}, True, True, "share"), ("garces2023", {"samples": 50, "horizon": 5}, False, False, 1)],
 )
 def test_distributed_run_makes_the_in_process_decisions(policy: str, options: dict, predictor: bool, secure: bool,
-                                                        threads: int | None) -> None:
+                                                        threads: int | str) -> None:
     """surge takes its forecasts from a predictor service process over mutual TLS and access control;
-    garces2023 from the coordinator, on an insecure bus, its agents planning on one kernel thread each.
+    its agents share the host's cores among those planning at the time (the default); garces2023 takes
+    its forecasts from the coordinator, on an insecure bus, its agents planning on one kernel thread each.
     Turns go out as their dependencies commit, and the in-process reference plans strictly one agent
     after another with every core."""
     cfg = FleetConfig(run=f"same-{policy}", taxis=3, minutes=8, policy=policy, options=options, deadline_s=120,

@@ -1,0 +1,86 @@
+"""The cores of one host, shared by the agents of a run that plan on it at the same time.
+
+An agent alone at its turn spreads its samples over every core.  Turns that do
+not depend on each other run side by side (:mod:`agents.waves`); each of those
+agents then takes its share of the cores instead, so that neither do the
+kernels oversubscribe the host nor does a lone agent leave a core idle.  The
+kernel uses fewer CPU seconds per decision on fewer threads, so side by side
+the cores do more work.
+
+Agents count each other through marker files, one per planning process, in a
+directory of the run that they share (under ``/dev/shm`` where there is one).
+The count decides only how many threads a chunk of samples runs on, never what
+it computes (:func:`agents._kernels.rollout_costs`), so a stale marker, or a
+host whose agents cannot see each other's files, costs speed but no decision.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+
+def share_dir(run: str) -> Path:
+    """Where the agents of ``run`` on this host, and of this user, mark that they are planning."""
+    root = Path("/dev/shm") if Path("/dev/shm").is_dir() else Path(tempfile.gettempdir())
+    return root / f"surge-{os.getuid()}-{re.sub(r'[^A-Za-z0-9_.-]', '_', run)}-planning"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class CoreShare:
+    """This process's share of the host's cores while it plans.
+
+    Parameters
+    ----------
+    run : str
+        The run's name: agents of other runs on the host are not counted.
+    cores : int
+        The cores to share (numba's thread count, at most the host's).
+    """
+
+    def __init__(self, run: str, cores: int) -> None:
+        if cores < 1:
+            raise ValueError(f"cores must be at least 1, got {cores}")
+        self.dir = share_dir(run)
+        self.cores = cores
+        self.me = self.dir / str(os.getpid())
+
+    @contextmanager
+    def planning(self) -> Iterator[CoreShare]:
+        """Marks this process as planning for the duration of the block."""
+        self.dir.mkdir(mode=0o700, exist_ok=True)
+        self.me.touch()
+        try:
+            yield self
+        finally:
+            self.me.unlink(missing_ok=True)
+
+    def planners(self) -> int:
+        """Processes of the run planning on this host now, this one included; markers of dead processes are removed."""
+        n = 0
+        with os.scandir(self.dir) as entries:
+            for entry in entries:
+                if not entry.name.isdigit():
+                    continue
+                if entry.name != self.me.name and not _alive(int(entry.name)):
+                    Path(entry.path).unlink(missing_ok=True)
+                    continue
+                n += 1
+        return max(n, 1)
+
+    def threads(self) -> int:
+        """The threads this process's next chunk of samples runs on: its share of the cores, at least one."""
+        return max(1, self.cores // self.planners())
