@@ -25,8 +25,11 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import functools
 import hashlib
 import json
+import os
+import platform
 import signal
 import sys
 import time
@@ -116,6 +119,18 @@ def run_episode(
     return sim.result(costs, controls, plan)
 
 
+@functools.cache
+def machine() -> str:
+    """This host's processor and core count, kept with each episode's planning seconds so that a report compares timings of one machine only."""
+    name = platform.processor() or platform.machine()
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                name = line.split(":", 1)[1].strip()
+                break
+    return f"{name} x{os.cpu_count()}"
+
+
 def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict[str, dict] | None = None) -> list[dict]:
     """All policies (and both oracles) on one instance; rows for the requested policies.
 
@@ -166,6 +181,7 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
                 "oracle_auction_cost": auction_cost,
                 "greedy_cost": greedy_cost,
                 "plan_seconds_per_step": float(np.mean(r.plan_seconds)),
+                "machine": machine(),
                 "decisions_sha256": r.decisions_sha256,
             }
         )

@@ -18,6 +18,7 @@ def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys) -
         assert section in report
     assert report.count("**held**") + report.count("**not held**") == 3
     assert "no predictor in this protocol" in report  # the smoke protocol says what surge planned with
+    assert "timed on one machine" in report  # the planning verdict compares rows of one machine
     for name in ("fig-total-cost.png", "fig-wait-overhead.png", "fig-surge-map.png", "surge-vs-greedy.gif"):
         assert (out / name).stat().st_size > 1000, name
     main_doc = json.loads((out / "results-main.json").read_text())
@@ -82,3 +83,23 @@ def test_the_pruning_ablation_runs_at_one_sample_count_pruned_and_unpruned() -> 
     assert pruning_pairs(QUICK) == [("surge:prune=none,samples=30", "surge:samples=30"),
                                     ("garces2023:prune=none,samples=30", "garces2023:samples=30")]
     assert pruning_pairs(replace(QUICK, samples=20)) == [("surge:prune=none", "surge"), ("garces2023:prune=none", "garces2023")]
+
+
+def _row(step_policy: str, seed: int, seconds: float, machine: str | None) -> dict:
+    row = {"date": "2022-11-17", "hour": 19, "seed": seed, "policy": step_policy, "plan_seconds_per_step": seconds}
+    if machine:
+        row["machine"] = machine
+    return row
+
+
+def test_the_planning_verdict_compares_rows_timed_on_one_machine() -> None:
+    from coordinator.report_md import planning_ratio
+
+    # The main run's surge rows were rerun on a slower machine: comparing them with garces2023's measures the machines.
+    main = {"episodes": [_row("surge", s, 2.0, "slow x2") for s in range(3)] + [_row("garces2023", s, 3.0, "fast x2") for s in range(3)]}
+    ablation = {"episodes": [_row("surge:forecast=true-rate", s, 1.0, "slow x2") for s in range(2)]
+                + [_row("garces2023:forecast=true-rate", s, 4.0, "slow x2") for s in range(2)]}
+    ratio, why = planning_ratio({"main": main, "ablation": ablation})
+    assert ratio == 0.25 and "over the 2 instances of the ablation step" in why and "(slow x2)" in why
+    ratio, why = planning_ratio({"main": main, "ablation": {"episodes": []}})
+    assert ratio == 2.0 / 3.0 and "may compare machines" in why  # no pair of one machine: said, not hidden
