@@ -309,8 +309,9 @@ def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Cal
     on the way (:func:`adaptive_choice`); otherwise the choice is
     :func:`choose` over every sample, whatever exact shortcuts are on.
     ``threads``, when given, is asked before each of :data:`SHARE_CHUNKS`
-    chunks of samples how many kernel threads to run it on
-    (:class:`agents.cores.CoreShare`); the control does not depend on it.
+    chunks of samples how many kernel threads to run it on (one: in the
+    calling thread, without a parallel region; :class:`agents.cores.CoreShare`,
+    :meth:`RolloutPolicy._act_waves`); the control does not depend on it.
     """
     return _plan(ctx, committed, agent, serial=False, threads=threads)
 
@@ -332,8 +333,10 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
     else:
         parts = []
         for c in range(SHARE_CHUNKS):
-            set_kernel_threads(threads())
-            parts.append(_run(ctx, inp, c * S // SHARE_CHUNKS, (c + 1) * S // SHARE_CHUNKS, np.ones(n_c, dtype=bool)))
+            n = threads()
+            if n > 1:
+                set_kernel_threads(n)
+            parts.append(_run(ctx, inp, c * S // SHARE_CHUNKS, (c + 1) * S // SHARE_CHUNKS, np.ones(n_c, dtype=bool), serial=n == 1))
         costs, settled = (np.concatenate(x, axis=1) for x in zip(*parts))
     shadowed = int(settled.sum())
     ctx.stats.add(False, n_c > 1 and shadowed == (n_c - 1) * S, n_c * S - shadowed, shadowed)
@@ -429,9 +432,9 @@ class RolloutPolicy(Policy):
     cap, adaptive, batch :
         Approximations, off by default; see :class:`RolloutConfig`.
     workers : int, optional
-        Threads planning independent agents at once (:mod:`agents.waves`);
-        1 (the default) plans one agent at a time with the samples in
-        parallel.  The decisions are the same either way.
+        Threads planning independent agents at once (:mod:`agents.waves`,
+        :meth:`_act_waves`); 1 (the default) plans one agent at a time with
+        the samples in parallel.  The decisions are the same either way.
 
     Attributes
     ----------
@@ -542,31 +545,66 @@ class RolloutPolicy(Policy):
         return u
 
     def _act_waves(self, ctx: StepContext, u: np.ndarray) -> None:
-        """Plan wave by wave, the agents of a wave in ``workers`` threads (each agent's samples in its thread, GIL released).
+        """Plan each agent once the agents it depends on have committed, up to ``workers`` at a time.
 
-        A wave of one agent runs its samples in parallel, as without workers.
+        This is the coordinator's release of turns (:mod:`agents.waves`), in
+        threads: an agent's costs depend only on its ``depends``, so it plans
+        with the controls committed so far and the result is that of strictly
+        sequential turns.  An agent planning alone runs its samples on every
+        kernel thread; while others plan too, each runs its chunks in its own
+        thread (the kernel releases the GIL), so the cores do not idle and the
+        kernel spends nothing on parallel regions.  Only one agent at a time
+        ever runs a parallel region, whatever numba's threading layer.
 
         Threads, not processes: the agents share the city and the minute's
-        context, and the kernel runs without the GIL, so only the short
-        Python preparation of each decision is serialised.  An agent reads
-        the controls of the earlier waves; those of its own wave, still at
-        the base policy's, cannot change its costs (:mod:`agents.waves`).
+        context, and only the short Python preparation of each decision is
+        serialised.
         """
-        from concurrent.futures import ThreadPoolExecutor
+        import heapq
+        import threading
+        from concurrent.futures import FIRST_COMPLETED, wait
 
         from agents.waves import plan_waves
 
         waves = plan_waves(self.city, ctx.obs, self.config.prune)
         self.last_waves = waves
         if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
             self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix="surge-plan")
-        for group in waves.groups():
-            if group.size == 1:
-                # A wave of one: its samples in parallel instead.
-                u[group[0]] = plan_agent(ctx, u[: group[0]], int(group[0]))
-                continue
-            seen = u.copy()
-            u[group] = list(self._pool.map(lambda a: _plan(ctx, seen[:a], int(a), serial=True), group))
+        cores = numba.config.NUMBA_NUM_THREADS
+        lock = threading.Lock()
+        running = [0]
+
+        def share() -> int:
+            return cores if running[0] == 1 else 1
+
+        def plan_one(agent: int, seen: np.ndarray) -> int:
+            with lock:
+                running[0] += 1
+            try:
+                return _plan(ctx, seen, agent, serial=False, threads=share)
+            finally:
+                with lock:
+                    running[0] -= 1
+
+        waiting = {int(a): set(d.tolist()) for a, d in zip(waves.agents, waves.depends)}
+        dependents = waves.dependents()
+        ready = [a for a, d in waiting.items() if not d]
+        heapq.heapify(ready)
+        futures: dict = {}
+        while ready or futures:
+            while ready and len(futures) < self.workers:
+                a = heapq.heappop(ready)
+                futures[self._pool.submit(plan_one, a, u[:a].copy())] = a
+            done, _ = wait(futures, return_when=FIRST_COMPLETED)
+            for fut in done:
+                a = futures.pop(fut)
+                u[a] = fut.result()
+                for b in dependents[a]:
+                    waiting[b].discard(a)
+                    if not waiting[b]:
+                        heapq.heappush(ready, b)
 
 
 @register
