@@ -16,6 +16,7 @@ host whose agents cannot see each other's files, costs speed but no decision.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import tempfile
@@ -80,6 +81,12 @@ class CoreShare:
                     continue
                 n += 1
         return max(n, 1)
+
+    def close(self) -> None:
+        """Leave the host: the run's directory goes with its last agent."""
+        self.me.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            self.dir.rmdir()
 
     def threads(self) -> int:
         """The threads this process's next chunk of samples runs on: its share of the cores, at least one."""

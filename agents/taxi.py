@@ -145,6 +145,8 @@ class TaxiAgent:
             finally:
                 token.undeclare()
                 self.forecasts.close()
+                if self.share is not None:
+                    self.share.close()
                 for s in subs:
                     s.undeclare()
         return self.decisions

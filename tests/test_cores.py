@@ -39,12 +39,16 @@ def test_a_share_counts_the_live_planners_of_its_run_and_drops_dead_markers() ->
         sleeper.kill()
         sleeper.wait()
         assert share.planners() == 1
+        share.close()
+        assert not share.dir.exists()  # the last agent of the run takes its directory along
+        share.close()
     finally:
         sleeper.kill()
         for d in (share.dir, CoreShare(f"other-{run}", 2).dir):
-            for f in d.iterdir():
-                f.unlink()
-            d.rmdir()
+            if d.exists():
+                for f in d.iterdir():
+                    f.unlink()
+                d.rmdir()
 
 
 def test_a_share_needs_a_core() -> None:
