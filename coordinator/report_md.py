@@ -283,6 +283,12 @@ def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | Non
                                ("surge:forecast=true-rate", "garces2023:forecast=true-rate")])
     lines += ["", "### Base policy (paper Table 4), whole-map sampling, pruning off", ""]
     lines += paired_rows(abl, [("surge:base=ia", "surge"), ("surge:scope=map", "surge"), *pruning_pairs(run.protocol)])
+    lines += ["", "### What rollout gains over its own base policy, by the information it plans with", "",
+              "Rollout over `ia` (`garces2023`: whole-map sampling; `surge:base=ia`: local sampling) and over `greedy` "
+              "(`surge`), each against its base policy on the same instances. Where rollout over `ia` gains with the model "
+              "or the true rates but not with previous-hour demand, the information limits it, not the base.", ""]
+    lines += paired_rows(abl, [("garces2023", "ia"), ("garces2023:forecast=model", "ia"), ("garces2023:forecast=true-rate", "ia"),
+                               ("surge:base=ia", "ia"), ("surge", "greedy"), ("surge:forecast=true-rate", "greedy")])
     ab = _by(summarize(abl))
     lines += ["", "Table 4 beside the paper's (total cost of our approach with each base policy; the paper's printed scale differs from its Table 1, so compare the ratio):", ""]
     lines += _table(["hour", "ours: base ia", "ours: base greedy", "ours ia / greedy", "paper: base ia", "paper: base greedy", "paper ia / greedy"],

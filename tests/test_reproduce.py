@@ -14,7 +14,8 @@ def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys) -
     out = tmp_path / "r"
     assert main(["reproduce", "--smoke", "--out", str(out)]) == 0
     report = (out / "REPORT.md").read_text()
-    for section in ("Verdicts", "Table 1", "Table 2", "Table 3", "Table 4", "Data provenance", "paired bootstrap"):
+    for section in ("Verdicts", "Table 1", "Table 2", "Table 3", "Table 4", "Data provenance", "paired bootstrap",
+                    "What rollout gains over its own base policy", "| 19h | `surge:base=ia` − `ia` |"):
         assert section in report
     assert report.count("**held**") + report.count("**not held**") == 3
     assert "no predictor in this protocol" in report  # the smoke protocol says what surge planned with
