@@ -3,9 +3,9 @@
 An agent alone at its turn spreads its samples over every core.  Turns that do
 not depend on each other run side by side (:mod:`agents.waves`); each of those
 agents then takes its share of the cores instead, so that neither do the
-kernels oversubscribe the host nor does a lone agent leave a core idle.  The
-kernel uses fewer CPU seconds per decision on fewer threads, so side by side
-the cores do more work.
+kernels oversubscribe the host (a parallel region ends with its slowest
+thread, which another agent's threads keep descheduling) nor does a lone
+agent leave a core idle.
 
 Agents count each other through marker files, one per planning process, in a
 directory of the run that they share (under ``/dev/shm`` where there is one).
