@@ -142,8 +142,8 @@ _LAZY: dict[str, str] = {
     "ia": "agents.ia",
     "oracle": "agents.oracle",
     "oracle-auction": "agents.oracle",
-    "surge": "agents.rollout",
-    "garces2023": "agents.rollout",
+    "surge": "agents.rollout_policy",
+    "garces2023": "agents.rollout_policy",
 }
 
 

@@ -1,4 +1,4 @@
-"""One-agent-at-a-time rollout (paper §4.1, Eq. 2) and the two rollout policies.
+"""One-agent-at-a-time rollout (paper §4.1, Eq. 2): one agent's decision, and the minute it shares with the others.
 
 At minute ``t`` the free taxis decide in agent order.  Agent ℓ scores each
 control of its control set (stay, pickup when a request waits at its node,
@@ -11,16 +11,8 @@ still outstanding at the end.  The agent takes the control of least Monte-Carlo
 mean cost; ties go to staying, then to pickup, then to the lowest node id.
 Busy taxis have a single control (their next hop) and are not planned.
 
-Two policies are registered:
-
-``surge`` (the paper's method)
-    Greedy base policy; limited certainty equivalence (η rounded when at
-    least one request per minute, a Bernoulli draw below); requests sampled
-    only in the agent's sector and its adjacent sectors; forecast ``model``
-    by default.
-``garces2023`` (Garces et al. 2023, the paper's baseline 3)
-    Instantaneous-assignment base policy; standard certainty equivalence;
-    requests sampled over the whole map; forecast ``previous-hour``.
+The two rollout policies that use it, ``surge`` and ``garces2023``, are in
+:mod:`agents.rollout_policy`.
 
 Standard certainty equivalence, as implemented here: η is replaced by its
 mean, so a sector receives its requests deterministically, one each time the
@@ -57,31 +49,24 @@ a pickup, transposed distance rows) are switchable, and
 ``tests/test_planning_speed.py`` shows each leaves every decision as it was.
 Two approximations are options, off by default: ``adaptive`` (successive
 elimination of candidates on paired differences) and ``cap`` (the agent's
-nearest taxis only).  Independent agents can plan at once
-(:mod:`agents.waves`, the policy's ``workers``), with the same decisions.
+nearest taxis only).
 """
 
 from __future__ import annotations
 
-import datetime as dt
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from pathlib import Path
-from typing import Any, ClassVar
 
 import numba
 import numpy as np
 
 from agents import _kernels as K
-from agents.base import EpisodeContext, Option, Policy, register
-from agents.forecast import PROVIDERS, make_provider
-from agents.greedy import greedy_controls
-from agents.shortcuts import MINUTE_NEAR_K, PlanStats, Shortcuts, transposed
-from agents.ia import ia_controls
 from agents.demand_tables import DemandTables
-from agents.rollout_config import BASES, CE_MODES, NEAR_K, SCOPES, RolloutConfig, default_prune
-from city.errors import ConfigError
-from city.forecast import Forecast, ForecastProvider
+from agents.greedy import greedy_controls
+from agents.ia import ia_controls
+from agents.rollout_config import BASES, CE_MODES, NEAR_K, RolloutConfig
+from agents.shortcuts import MINUTE_NEAR_K, PlanStats, Shortcuts, transposed
+from city.forecast import Forecast
 from city.graph import City
 from city.sim import PICKUP, Observation
 
@@ -311,7 +296,7 @@ def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Cal
     ``threads``, when given, is asked before each of :data:`SHARE_CHUNKS`
     chunks of samples how many kernel threads to run it on (one: in the
     calling thread, without a parallel region; :class:`agents.cores.CoreShare`,
-    :meth:`RolloutPolicy._act_waves`); the control does not depend on it.
+    :meth:`agents.rollout_policy.RolloutPolicy._act_waves`); the control does not depend on it.
     """
     return _plan(ctx, committed, agent, serial=False, threads=threads)
 
@@ -413,211 +398,3 @@ def warm_up(city: City | None = None, config: RolloutConfig | None = None, seria
     obs = Observation(t=0, pos=nodes[:1], tau=np.zeros(1, np.int32), dest=np.full(1, -1, np.int32), req_index=np.zeros(1, np.int64),
                       req_pickup=nodes[:1], req_dropoff=nodes[-1:], req_entry=np.zeros(1, np.int32))
     _plan(prepare_step(city, cfg, obs, DemandTables.build(city, fc, cfg.ce, cfg.seed), 0), np.empty(0, np.int32), 0, serial)
-
-
-class RolloutPolicy(Policy):
-    """One-agent-at-a-time rollout with a forecast provider; subclasses fix the defaults.
-
-    Parameters
-    ----------
-    city : City
-    forecast : str
-        Forecast provider name (``model``, ``previous-hour``, ``true-rate``).
-    model : str or Path, optional
-        Trained predictor directory for ``forecast="model"``.
-    horizon, samples, base, scope, ce, seed :
-        See :class:`RolloutConfig`.
-    prune : int or None or "auto"
-        Pruning radius in hops; ``"auto"`` is :func:`default_prune` of the horizon.
-    cap, adaptive, batch :
-        Approximations, off by default; see :class:`RolloutConfig`.
-    workers : int, optional
-        Threads planning independent agents at once (:mod:`agents.waves`,
-        :meth:`_act_waves`); 1 (the default) plans one agent at a time with
-        the samples in parallel.  The decisions are the same either way.
-
-    Attributes
-    ----------
-    shortcuts : Shortcuts
-        Exact savings in use (all); benchmarks and tests switch them off to compare.
-    last_stats : PlanStats or None
-        The counters of the last :meth:`act`.
-    """
-
-    defaults: ClassVar[dict[str, Any]] = {}
-    options = (
-        Option("forecast", str, choices=tuple(sorted(PROVIDERS)), help="forecast provider"),
-        Option("model", str, noun="a directory", help="trained predictor directory for forecast=model"),
-        Option("horizon", int, low=1, high=240, help="H, minutes of base policy after the decision minute"),
-        Option("samples", int, low=1, high=1_000_000, help="Monte-Carlo samples per agent decision"),
-        Option("base", str, choices=tuple(BASES), help="base policy"),
-        Option("scope", str, choices=SCOPES, help="where future requests are sampled"),
-        Option("ce", str, choices=tuple(CE_MODES), help="certainty equivalence"),
-        Option("seed", int, low=0, help="seed of every decision's random numbers"),
-        Option("prune", int, low=0, words={"auto": "auto", "none": None}, help="pruning radius in hops"),
-        Option("cap", int, low=1, words={"none": None}, help="approximation: simulate only the agent's k nearest taxis"),
-        Option("adaptive", float, low=0, words={"none": None},
-               help="approximation: drop a candidate once it trails the best by this many standard errors"),
-        Option("batch", int, low=2, help="samples per batch of adaptive"),
-        Option("workers", int, low=1, help="threads planning independent agents of a minute concurrently"),
-    )
-    shortcuts: Shortcuts = Shortcuts()
-    last_stats: PlanStats | None = None
-
-    def __init__(self, city: City, forecast: str | None = None, model: str | Path | None = None, workers: int | None = None,
-                 **planner: Any) -> None:
-        super().__init__(city)
-        self.workers = int(workers) if workers is not None else 1
-        if self.workers < 1:
-            raise ConfigError(f"policy {self.name!r}: workers must be at least 1, got {workers}")
-        try:
-            self.config = self.rollout_config(**planner)
-        except TypeError as exc:
-            raise ConfigError(f"policy {self.name!r}: {exc}") from None
-        self.provider: ForecastProvider = make_provider(forecast or self.defaults["forecast"], model)
-        self.context: EpisodeContext | None = None
-        self._tables: dict[int, DemandTables] = {}
-        self._pool = None
-        self.last_waves = None
-
-    @classmethod
-    def rollout_config(
-        cls,
-        horizon: int | None = None,
-        samples: int | None = None,
-        base: str | None = None,
-        scope: str | None = None,
-        ce: str | None = None,
-        seed: int | None = None,
-        prune: int | str | None = "auto",
-        cap: int | None = None,
-        adaptive: float | None = None,
-        batch: int | None = None,
-    ) -> RolloutConfig:
-        """The planner settings of this policy with ``None`` options at its defaults; no forecast is loaded."""
-        d = cls.defaults
-        H = int(horizon if horizon is not None else d["horizon"])
-        return RolloutConfig(
-            horizon=H,
-            samples=int(samples if samples is not None else d["samples"]),
-            base=base or d["base"],
-            scope=scope or d["scope"],
-            ce=ce or d["ce"],
-            seed=int(seed if seed is not None else 0),
-            prune=default_prune(H) if prune == "auto" else (None if prune is None else int(prune)),
-            cap=None if cap is None else int(cap),
-            adaptive=None if adaptive is None else float(adaptive),
-            batch=int(batch) if batch is not None else 100,
-        )
-
-    def reset(self, context: EpisodeContext) -> None:
-        if context.world is None:
-            raise ConfigError(f"policy {self.name!r} needs the episode's demand world for its forecasts")
-        self.context = context
-        self._tables = {}
-
-    def forecast(self, hour_offset: int) -> Forecast:
-        """The provider's forecast of the hour ``hour_offset`` hours after the episode's start."""
-        ctx = self.context
-        assert ctx is not None, "reset() must be called before act()"
-        when = dt.datetime.combine(ctx.date, dt.time()) + dt.timedelta(hours=ctx.hour + hour_offset)
-        return self.provider.forecast(ctx.world, when)
-
-    def tables(self, hour_offset: int) -> DemandTables:
-        """Demand tables for the hour ``hour_offset`` hours after the episode's start."""
-        if hour_offset not in self._tables:
-            self._tables[hour_offset] = DemandTables.build(self.city, self.forecast(hour_offset), self.config.ce, self.config.seed)
-        return self._tables[hour_offset]
-
-    def step_context(self, obs: Observation) -> StepContext:
-        """The shared context of minute ``obs.t``."""
-        return prepare_step(self.city, self.config, obs, self.tables(obs.t // 60), obs.t % 60, self.shortcuts)
-
-    def act(self, obs: Observation) -> np.ndarray:
-        ctx = self.step_context(obs)
-        u = ctx.base_controls.copy()
-        if self.workers > 1:
-            self._act_waves(ctx, u)
-        else:
-            for agent in np.flatnonzero(obs.tau == 0):
-                u[agent] = plan_agent(ctx, u[:agent], int(agent))
-        self.last_stats = ctx.stats
-        return u
-
-    def _act_waves(self, ctx: StepContext, u: np.ndarray) -> None:
-        """Plan each agent once the agents it depends on have committed, up to ``workers`` at a time.
-
-        This is the coordinator's release of turns (:mod:`agents.waves`), in
-        threads: an agent's costs depend only on its ``depends``, so it plans
-        with the controls committed so far and the result is that of strictly
-        sequential turns.  An agent planning alone runs its samples on every
-        kernel thread; while others plan too, each runs its chunks in its own
-        thread (the kernel releases the GIL), so the cores do not idle and the
-        kernel spends nothing on parallel regions.  Only one agent at a time
-        ever runs a parallel region, whatever numba's threading layer.
-
-        Threads, not processes: the agents share the city and the minute's
-        context, and only the short Python preparation of each decision is
-        serialised.
-        """
-        import heapq
-        import threading
-        from concurrent.futures import FIRST_COMPLETED, wait
-
-        from agents.waves import plan_waves
-
-        waves = plan_waves(self.city, ctx.obs, self.config.prune)
-        self.last_waves = waves
-        if self._pool is None:
-            from concurrent.futures import ThreadPoolExecutor
-
-            self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix="surge-plan")
-        cores = numba.config.NUMBA_NUM_THREADS
-        lock = threading.Lock()
-        running = [0]
-
-        def share() -> int:
-            return cores if running[0] == 1 else 1
-
-        def plan_one(agent: int, seen: np.ndarray) -> int:
-            with lock:
-                running[0] += 1
-            try:
-                return _plan(ctx, seen, agent, serial=False, threads=share)
-            finally:
-                with lock:
-                    running[0] -= 1
-
-        waiting = {int(a): set(d.tolist()) for a, d in zip(waves.agents, waves.depends)}
-        dependents = waves.dependents()
-        ready = [a for a, d in waiting.items() if not d]
-        heapq.heapify(ready)
-        futures: dict = {}
-        while ready or futures:
-            while ready and len(futures) < self.workers:
-                a = heapq.heappop(ready)
-                futures[self._pool.submit(plan_one, a, u[:a].copy())] = a
-            done, _ = wait(futures, return_when=FIRST_COMPLETED)
-            for fut in done:
-                a = futures.pop(fut)
-                u[a] = fut.result()
-                for b in dependents[a]:
-                    waiting[b].discard(a)
-                    if not waiting[b]:
-                        heapq.heappush(ready, b)
-
-
-@register
-class Surge(RolloutPolicy):
-    """The paper's method: greedy base, limited CE, local sampling, event-informed forecast."""
-
-    name = "surge"
-    defaults: ClassVar[dict[str, Any]] = {"forecast": "model", "horizon": 10, "samples": 1000, "base": "greedy", "scope": "local", "ce": "limited"}
-
-
-@register
-class Garces2023(RolloutPolicy):
-    """Garces et al. (2023): IA base, standard CE, whole-map sampling, previous-hour demand."""
-
-    name = "garces2023"
-    defaults: ClassVar[dict[str, Any]] = {"forecast": "previous-hour", "horizon": 10, "samples": 1000, "base": "ia", "scope": "map", "ce": "standard"}

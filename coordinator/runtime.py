@@ -40,7 +40,8 @@ from typing import Any
 import numpy as np
 
 from agents.base import EpisodeContext, make_policy, policy_class
-from agents.rollout import RolloutConfig, RolloutPolicy, base_controls, candidate_controls
+from agents.rollout import RolloutConfig, base_controls, candidate_controls
+from agents.rollout_policy import RolloutPolicy
 from agents.waves import Waves, plan_waves
 from bus.checks import Bounds, Rejections, check_ack, check_choice, check_control, check_forecast
 from bus.delta import state_message

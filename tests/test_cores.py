@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from agents.cores import CoreShare
-from agents.rollout import DemandTables, RolloutConfig, default_prune, plan_agent, prepare_step
+from agents.rollout import DemandTables, RolloutConfig, plan_agent, prepare_step
+from agents.rollout_config import default_prune
 from city.scenario import load_city
 from tests.test_planning_speed import H, SAMPLES, forecast, seeded_state
 

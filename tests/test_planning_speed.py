@@ -13,7 +13,8 @@ import pytest
 
 from city.forecast import Forecast
 from agents.base import make_policy
-from agents.rollout import DemandTables, RolloutConfig, Shortcuts, default_prune, plan_agent, prepare_step
+from agents.rollout import DemandTables, RolloutConfig, Shortcuts, plan_agent, prepare_step
+from agents.rollout_config import default_prune
 from agents.waves import plan_waves
 from city.graph import City
 from city.scenario import load_city

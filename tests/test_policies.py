@@ -111,7 +111,7 @@ def test_every_policy_declares_exactly_the_options_its_constructor_takes() -> No
     import inspect
 
     from agents.base import policy_class
-    from agents.rollout import RolloutPolicy
+    from agents.rollout_policy import RolloutPolicy
 
     for name in policy_names():
         cls = policy_class(name)

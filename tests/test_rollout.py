@@ -21,10 +21,10 @@ from agents.rollout import (
     agent_costs,
     candidate_controls,
     choose,
-    default_prune,
     plan_agent,
     prepare_step,
 )
+from agents.rollout_config import default_prune
 from city.errors import ConfigError
 from city.forecast import Forecast
 from city.graph import City

@@ -1,7 +1,7 @@
 """Turns in dependency waves make the decisions of strictly sequential turns, over whole episodes on both maps.
 
 The in-process policy with ``workers`` plans each wave's agents in threads
-(:meth:`agents.rollout.RolloutPolicy._act_waves`); the coordinator releases
+(:meth:`agents.rollout_policy.RolloutPolicy._act_waves`); the coordinator releases
 the same waves over the bus (``tests/test_runtime.py``).  Both read the one
 graph of :func:`agents.waves.plan_waves`.
 """

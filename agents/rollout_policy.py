@@ -1,0 +1,241 @@
+"""The two rollout policies: ``surge`` (the paper's method) and ``garces2023`` (its baseline).
+
+Both plan every free taxi with :func:`agents.rollout.plan_agent`; they differ
+in their defaults.
+
+``surge`` (the paper's method)
+    Greedy base policy; limited certainty equivalence (η rounded when at
+    least one request per minute, a Bernoulli draw below); requests sampled
+    only in the agent's sector and its adjacent sectors; forecast ``model``
+    by default.
+``garces2023`` (Garces et al. 2023, the paper's baseline 3)
+    Instantaneous-assignment base policy; standard certainty equivalence;
+    requests sampled over the whole map; forecast ``previous-hour``.
+
+Independent agents can plan at once (:mod:`agents.waves`, the policy's
+``workers``), with the decisions of strictly sequential turns.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import heapq
+import threading
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numba
+import numpy as np
+
+from agents.base import EpisodeContext, Option, Policy, register
+from agents.demand_tables import DemandTables
+from agents.forecast import PROVIDERS, make_provider
+from agents.rollout import StepContext, plan_agent, prepare_step
+from agents.rollout_config import BASES, CE_MODES, SCOPES, RolloutConfig, default_prune
+from agents.shortcuts import PlanStats, Shortcuts
+from agents.waves import plan_waves
+from city.errors import ConfigError
+from city.forecast import Forecast, ForecastProvider
+from city.graph import City
+from city.sim import Observation
+
+
+class RolloutPolicy(Policy):
+    """One-agent-at-a-time rollout with a forecast provider; subclasses fix the defaults.
+
+    Parameters
+    ----------
+    city : City
+    forecast : str
+        Forecast provider name (``model``, ``previous-hour``, ``true-rate``).
+    model : str or Path, optional
+        Trained predictor directory for ``forecast="model"``.
+    horizon, samples, base, scope, ce, seed :
+        See :class:`RolloutConfig`.
+    prune : int or None or "auto"
+        Pruning radius in hops; ``"auto"`` is :func:`default_prune` of the horizon.
+    cap, adaptive, batch :
+        Approximations, off by default; see :class:`RolloutConfig`.
+    workers : int, optional
+        Threads planning independent agents at once (:mod:`agents.waves`,
+        :meth:`_act_waves`); 1 (the default) plans one agent at a time with
+        the samples in parallel.  The decisions are the same either way.
+
+    Attributes
+    ----------
+    shortcuts : Shortcuts
+        Exact savings in use (all); benchmarks and tests switch them off to compare.
+    last_stats : PlanStats or None
+        The counters of the last :meth:`act`.
+    """
+
+    defaults: ClassVar[dict[str, Any]] = {}
+    options = (
+        Option("forecast", str, choices=tuple(sorted(PROVIDERS)), help="forecast provider"),
+        Option("model", str, noun="a directory", help="trained predictor directory for forecast=model"),
+        Option("horizon", int, low=1, high=240, help="H, minutes of base policy after the decision minute"),
+        Option("samples", int, low=1, high=1_000_000, help="Monte-Carlo samples per agent decision"),
+        Option("base", str, choices=tuple(BASES), help="base policy"),
+        Option("scope", str, choices=SCOPES, help="where future requests are sampled"),
+        Option("ce", str, choices=tuple(CE_MODES), help="certainty equivalence"),
+        Option("seed", int, low=0, help="seed of every decision's random numbers"),
+        Option("prune", int, low=0, words={"auto": "auto", "none": None}, help="pruning radius in hops"),
+        Option("cap", int, low=1, words={"none": None}, help="approximation: simulate only the agent's k nearest taxis"),
+        Option("adaptive", float, low=0, words={"none": None},
+               help="approximation: drop a candidate once it trails the best by this many standard errors"),
+        Option("batch", int, low=2, help="samples per batch of adaptive"),
+        Option("workers", int, low=1, help="threads planning independent agents of a minute concurrently"),
+    )
+    shortcuts: Shortcuts = Shortcuts()
+    last_stats: PlanStats | None = None
+
+    def __init__(self, city: City, forecast: str | None = None, model: str | Path | None = None, workers: int | None = None,
+                 **planner: Any) -> None:
+        super().__init__(city)
+        self.workers = int(workers) if workers is not None else 1
+        if self.workers < 1:
+            raise ConfigError(f"policy {self.name!r}: workers must be at least 1, got {workers}")
+        try:
+            self.config = self.rollout_config(**planner)
+        except TypeError as exc:
+            raise ConfigError(f"policy {self.name!r}: {exc}") from None
+        self.provider: ForecastProvider = make_provider(forecast or self.defaults["forecast"], model)
+        self.context: EpisodeContext | None = None
+        self._tables: dict[int, DemandTables] = {}
+        self._pool = None
+        self.last_waves = None
+
+    @classmethod
+    def rollout_config(
+        cls,
+        horizon: int | None = None,
+        samples: int | None = None,
+        base: str | None = None,
+        scope: str | None = None,
+        ce: str | None = None,
+        seed: int | None = None,
+        prune: int | str | None = "auto",
+        cap: int | None = None,
+        adaptive: float | None = None,
+        batch: int | None = None,
+    ) -> RolloutConfig:
+        """The planner settings of this policy with ``None`` options at its defaults; no forecast is loaded."""
+        d = cls.defaults
+        H = int(horizon if horizon is not None else d["horizon"])
+        return RolloutConfig(
+            horizon=H,
+            samples=int(samples if samples is not None else d["samples"]),
+            base=base or d["base"],
+            scope=scope or d["scope"],
+            ce=ce or d["ce"],
+            seed=int(seed if seed is not None else 0),
+            prune=default_prune(H) if prune == "auto" else (None if prune is None else int(prune)),
+            cap=None if cap is None else int(cap),
+            adaptive=None if adaptive is None else float(adaptive),
+            batch=int(batch) if batch is not None else 100,
+        )
+
+    def reset(self, context: EpisodeContext) -> None:
+        if context.world is None:
+            raise ConfigError(f"policy {self.name!r} needs the episode's demand world for its forecasts")
+        self.context = context
+        self._tables = {}
+
+    def forecast(self, hour_offset: int) -> Forecast:
+        """The provider's forecast of the hour ``hour_offset`` hours after the episode's start."""
+        ctx = self.context
+        assert ctx is not None, "reset() must be called before act()"
+        when = dt.datetime.combine(ctx.date, dt.time()) + dt.timedelta(hours=ctx.hour + hour_offset)
+        return self.provider.forecast(ctx.world, when)
+
+    def tables(self, hour_offset: int) -> DemandTables:
+        """Demand tables for the hour ``hour_offset`` hours after the episode's start."""
+        if hour_offset not in self._tables:
+            self._tables[hour_offset] = DemandTables.build(self.city, self.forecast(hour_offset), self.config.ce, self.config.seed)
+        return self._tables[hour_offset]
+
+    def step_context(self, obs: Observation) -> StepContext:
+        """The shared context of minute ``obs.t``."""
+        return prepare_step(self.city, self.config, obs, self.tables(obs.t // 60), obs.t % 60, self.shortcuts)
+
+    def act(self, obs: Observation) -> np.ndarray:
+        ctx = self.step_context(obs)
+        u = ctx.base_controls.copy()
+        if self.workers > 1:
+            self._act_waves(ctx, u)
+        else:
+            for agent in np.flatnonzero(obs.tau == 0):
+                u[agent] = plan_agent(ctx, u[:agent], int(agent))
+        self.last_stats = ctx.stats
+        return u
+
+    def _act_waves(self, ctx: StepContext, u: np.ndarray) -> None:
+        """Plan each agent once the agents it depends on have committed, up to ``workers`` at a time.
+
+        This is the coordinator's release of turns (:mod:`agents.waves`), in
+        threads: an agent's costs depend only on its ``depends``, so it plans
+        with the controls committed so far and the result is that of strictly
+        sequential turns.  An agent planning alone runs its samples on every
+        kernel thread; while others plan too, each runs its chunks in its own
+        thread (the kernel releases the GIL), so the cores do not idle and the
+        kernel spends nothing on parallel regions.  Only one agent at a time
+        ever runs a parallel region, whatever numba's threading layer.
+
+        Threads, not processes: the agents share the city and the minute's
+        context, and only the short Python preparation of each decision is
+        serialised.
+        """
+        waves = plan_waves(self.city, ctx.obs, self.config.prune)
+        self.last_waves = waves
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix="surge-plan")
+        cores = numba.config.NUMBA_NUM_THREADS
+        lock = threading.Lock()
+        running = [0]
+
+        def share() -> int:
+            return cores if running[0] == 1 else 1
+
+        def plan_one(agent: int, seen: np.ndarray) -> int:
+            with lock:
+                running[0] += 1
+            try:
+                return plan_agent(ctx, seen, agent, threads=share)
+            finally:
+                with lock:
+                    running[0] -= 1
+
+        waiting = {int(a): set(d.tolist()) for a, d in zip(waves.agents, waves.depends)}
+        dependents = waves.dependents()
+        ready = [a for a, d in waiting.items() if not d]
+        heapq.heapify(ready)
+        futures: dict = {}
+        while ready or futures:
+            while ready and len(futures) < self.workers:
+                a = heapq.heappop(ready)
+                futures[self._pool.submit(plan_one, a, u[:a].copy())] = a
+            done, _ = wait(futures, return_when=FIRST_COMPLETED)
+            for fut in done:
+                a = futures.pop(fut)
+                u[a] = fut.result()
+                for b in dependents[a]:
+                    waiting[b].discard(a)
+                    if not waiting[b]:
+                        heapq.heappush(ready, b)
+
+
+@register
+class Surge(RolloutPolicy):
+    """The paper's method: greedy base, limited CE, local sampling, event-informed forecast."""
+
+    name = "surge"
+    defaults: ClassVar[dict[str, Any]] = {"forecast": "model", "horizon": 10, "samples": 1000, "base": "greedy", "scope": "local", "ce": "limited"}
+
+
+@register
+class Garces2023(RolloutPolicy):
+    """Garces et al. (2023): IA base, standard CE, whole-map sampling, previous-hour demand."""
+
+    name = "garces2023"
+    defaults: ClassVar[dict[str, Any]] = {"forecast": "previous-hour", "horizon": 10, "samples": 1000, "base": "ia", "scope": "map", "ce": "standard"}
