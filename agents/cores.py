@@ -69,18 +69,19 @@ class CoreShare:
         finally:
             self.me.unlink(missing_ok=True)
 
-    def planners(self) -> int:
-        """Processes of the run planning on this host now, this one included; markers of dead processes are removed."""
-        n = 0
+    def planners(self) -> list[int]:
+        """Process ids of the run planning on this host now, ascending, this one included; markers of dead processes are removed."""
+        pids = {os.getpid()}
         with os.scandir(self.dir) as entries:
             for entry in entries:
                 if not entry.name.isdigit():
                     continue
-                if entry.name != self.me.name and not _alive(int(entry.name)):
+                pid = int(entry.name)
+                if pid not in pids and not _alive(pid):
                     Path(entry.path).unlink(missing_ok=True)
                     continue
-                n += 1
-        return max(n, 1)
+                pids.add(pid)
+        return sorted(pids)
 
     def close(self) -> None:
         """Leave the host: the run's directory goes with its last agent."""
@@ -89,5 +90,11 @@ class CoreShare:
             self.dir.rmdir()
 
     def threads(self) -> int:
-        """The threads this process's next chunk of samples runs on: its share of the cores, at least one."""
-        return max(1, self.cores // self.planners())
+        """The threads this process's next chunk of samples runs on: its share of the cores, at least one.
+
+        The cores that do not divide evenly go one each to the planners of
+        lowest process id, so that together they use every core.
+        """
+        pids = self.planners()
+        n, rank = len(pids), pids.index(os.getpid())
+        return max(1, self.cores // n + (rank < self.cores % n))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import itertools
+import os
 import subprocess
 import sys
 import uuid
@@ -31,15 +32,17 @@ def test_a_share_counts_the_live_planners_of_its_run_and_drops_dead_markers() ->
         (CoreShare(f"other-{run}", 2).dir).mkdir(mode=0o700)
         with share.planning():
             assert share.me.exists()
-            assert share.planners() == 2  # this process and the sleeper; the dead one's marker is gone
+            assert share.planners() == sorted([os.getpid(), sleeper.pid])  # the dead one's marker is gone
             assert not (share.dir / str(dead.pid)).exists()
             assert share.threads() == 1
             assert CoreShare(run, 4).threads() == 2
+            # 5 cores for 2 planners: the lower process id takes the odd one, so that every core is used.
+            assert CoreShare(run, 5).threads() == (3 if os.getpid() < sleeper.pid else 2)
         assert not share.me.exists()
-        assert share.planners() == 1 and share.threads() == 2  # alone: every core
+        assert share.planners() == sorted([os.getpid(), sleeper.pid])
         sleeper.kill()
         sleeper.wait()
-        assert share.planners() == 1
+        assert share.planners() == [os.getpid()] and share.threads() == 2  # alone: every core
         share.close()
         assert not share.dir.exists()  # the last agent of the run takes its directory along
         share.close()
