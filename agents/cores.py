@@ -27,7 +27,8 @@ from pathlib import Path
 
 def share_dir(run: str) -> Path:
     """Where the agents of ``run`` on this host, and of this user, mark that they are planning."""
-    root = Path("/dev/shm") if Path("/dev/shm").is_dir() else Path(tempfile.gettempdir())
+    shm = Path("/dev/shm")
+    root = shm if shm.is_dir() and os.access(shm, os.W_OK | os.X_OK) else Path(tempfile.gettempdir())
     return root / f"surge-{os.getuid()}-{re.sub(r'[^A-Za-z0-9_.-]', '_', run)}-planning"
 
 
@@ -61,17 +62,21 @@ class CoreShare:
 
     @contextmanager
     def planning(self) -> Iterator[CoreShare]:
-        """Marks this process as planning for the duration of the block."""
-        self.dir.mkdir(mode=0o700, exist_ok=True)
-        self.me.touch()
+        """Marks this process as planning for the duration of the block (unmarked where the directory cannot be written)."""
+        with contextlib.suppress(OSError):
+            self.dir.mkdir(mode=0o700, exist_ok=True)
+            self.me.touch()
         try:
             yield self
         finally:
-            self.me.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                self.me.unlink()
 
     def planners(self) -> list[int]:
         """Process ids of the run planning on this host now, ascending, this one included; markers of dead processes are removed."""
         pids = {os.getpid()}
+        if not self.dir.is_dir():
+            return [os.getpid()]
         with os.scandir(self.dir) as entries:
             for entry in entries:
                 if not entry.name.isdigit():
@@ -85,7 +90,8 @@ class CoreShare:
 
     def close(self) -> None:
         """Leave the host: the run's directory goes with its last agent."""
-        self.me.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            self.me.unlink()
         with contextlib.suppress(OSError):
             self.dir.rmdir()
 

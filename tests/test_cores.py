@@ -75,3 +75,13 @@ def test_controls_do_not_depend_on_the_threads_each_chunk_of_samples_runs_on(bas
             u[agent] = plan_agent(ctx, u[:agent], int(agent), threads=threads)
         hashes.append(hashlib.sha256(u.tobytes()).hexdigest())
     assert hashes[0] == hashes[1]
+
+
+def test_a_share_that_cannot_write_its_directory_plans_as_if_alone(tmp_path) -> None:  # noqa: ANN001
+    share = CoreShare("x", 2)
+    share.dir = tmp_path / "not-a-directory"
+    share.dir.write_text("")  # a file where the directory should be: nothing can be marked there
+    share.me = share.dir / str(os.getpid())
+    with share.planning():
+        assert share.threads() == 2
+    share.close()
