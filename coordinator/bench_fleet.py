@@ -167,7 +167,8 @@ def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: l
 def print_report(rep: dict) -> None:
     c, m, mem = rep["config"], rep["minute_seconds"], rep["memory"]
     hosts = [h for h in rep["projected_minute_seconds_median"]]
-    print(f"{c['taxis']} agent processes, {c['scenario']}, {c['minutes']} min from {c['date']} {c['hour']}:00, {c['policy']}; "
+    print(f"{c['taxis']} agent processes ({c['agent_threads']} kernel threads each), {c['scenario']}, {c['minutes']} min from "
+          f"{c['date']} {c['hour']}:00, {c['policy']}; "
           f"decisions {'identical' if rep['same_decisions'] else 'DIFFERENT'} ({rep['fallbacks']} fallbacks)")
     print(f"  {'t':>3} {'free':>4} {'waves':>5} {'distributed':>11} {'sequential':>10} {'agents plan':>11} {'seq. plan':>9} "
           + " ".join(f"{'on ' + h:>13}" for h in hosts))
