@@ -118,6 +118,12 @@ class TaxiAgent:
         self.stalled: float | None = None
         #: This host's cores, shared with the run's other agents planning at the same time (``threads="share"``).
         self.share: CoreShare | None = None
+        if isinstance(config.threads, int):
+            set_kernel_threads(config.threads)
+        elif config.threads == "share":
+            self.share = CoreShare(config.run, numba.config.NUMBA_NUM_THREADS)
+        elif config.threads != "all":
+            raise ConfigError(f"agent threads: {config.threads!r} is not 'share', 'all' or a number")
 
     def run(self) -> int:
         """Join the run and plan until it stops; the number of controls this agent planned."""
@@ -153,13 +159,6 @@ class TaxiAgent:
 
     def _warm_up(self) -> None:
         """Load (or build) the compiled kernels before joining, so that a fresh checkout's first turn is not late."""
-        threads = self.cfg.threads
-        if isinstance(threads, int):
-            set_kernel_threads(threads)
-        elif threads == "share":
-            self.share = CoreShare(self.cfg.run, numba.config.NUMBA_NUM_THREADS)
-        elif threads != "all":
-            raise ConfigError(f"agent threads: {threads!r} is not 'share', 'all' or a number")
         warm_up(self.city, self.rollout)
 
     def _fetch_spec(self, session) -> RunSpec:  # noqa: ANN001

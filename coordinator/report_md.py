@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from coordinator.analysis import compare_pair, complete_seeds, oracle_exceptions, plot, summarize
+from coordinator.analysis import compare_pair, complete_seeds, oracle_exceptions, paired, plot, summarize
 
 HOURS = (15, 17, 19, 21)
 #: Table 1 of the paper, average total cost (mean, std) per hour.
@@ -159,11 +159,9 @@ def planning_ratio(docs: dict) -> tuple[float, str]:
     """
     best: tuple[int, str, str, str, list] = (0, "", "", "", [])
     for step, a, b in PLAN_PAIRS:
-        inst: dict[tuple, dict] = {}
-        for e in docs.get(step, {}).get("episodes", []):
-            if e["policy"] in (a, b):
-                inst.setdefault((e["date"], e["hour"], e["seed"]), {})[e["policy"]] = e
-        same = [(r[a], r[b]) for r in inst.values() if len(r) == 2 and r[a].get("machine") and r[a].get("machine") == r[b].get("machine")]
+        doc = docs.get(step, {"episodes": []})
+        pairs = [pair for h in sorted({e["hour"] for e in doc["episodes"]}) for pair in paired(doc, a, b, h)]
+        same = [(x, y) for x, y in pairs if x.get("machine") and x.get("machine") == y.get("machine")]
         if len(same) > best[0]:
             best = (len(same), step, a, b, same)
     n, step, a, b, same = best
