@@ -90,6 +90,7 @@ class EpisodeResult:
     stage_costs: list[int]
     controls: np.ndarray
     plan_seconds: list[float] = field(default_factory=list)
+    plan_cpu_seconds: list[float] = field(default_factory=list)
 
     @property
     def decisions_sha256(self) -> str:
@@ -204,7 +205,8 @@ class FleetSim:
                 f"controls[{taxi}]: {int(controls[taxi])} is not a neighbour of intersection {int(self.state.pos[taxi])}"
             )
 
-    def result(self, stage_costs: list[int], controls: np.ndarray, plan_seconds: list[float]) -> EpisodeResult:
+    def result(self, stage_costs: list[int], controls: np.ndarray, plan_seconds: list[float],
+               plan_cpu_seconds: list[float] | None = None) -> EpisodeResult:
         served = int((self.state.picked_at >= 0).sum())
         return EpisodeResult(
             total_cost=int(sum(stage_costs)),
@@ -214,4 +216,5 @@ class FleetSim:
             stage_costs=stage_costs,
             controls=controls,
             plan_seconds=plan_seconds,
+            plan_cpu_seconds=plan_cpu_seconds or [],
         )

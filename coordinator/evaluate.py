@@ -108,15 +108,17 @@ def run_episode(
     policy.reset(context)
     costs: list[int] = []
     plan: list[float] = []
+    cpu: list[float] = []
     controls = np.zeros((context.minutes, len(start)), dtype=np.int32)
     for t in range(context.minutes):
         obs = sim.observe()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         u = policy.act(obs)
         plan.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
         controls[t] = u
         costs.append(sim.step(u))
-    return sim.result(costs, controls, plan)
+    return sim.result(costs, controls, plan, cpu)
 
 
 @functools.cache
@@ -181,6 +183,7 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
                 "oracle_auction_cost": auction_cost,
                 "greedy_cost": greedy_cost,
                 "plan_seconds_per_step": float(np.mean(r.plan_seconds)),
+                "plan_cpu_seconds_per_step": float(np.mean(r.plan_cpu_seconds)),
                 "machine": machine(),
                 "decisions_sha256": r.decisions_sha256,
             }

@@ -90,7 +90,11 @@ ABLATIONS = (
     "garces2023:forecast=true-rate",
     "surge:base=ia",
     "surge:scope=map",
+    "garces2023:forecast=model,ce=limited",
 )
+#: ``garces2023`` with the model and ``surge``'s limited certainty equivalence: between it, ``garces2023:forecast=model``
+#: and ``surge:base=ia`` the certainty equivalence and the sampling scope are told apart.
+CE_LABEL = ABLATIONS[-1]
 
 
 def pruning_pairs(protocol: Protocol) -> list[tuple[str, str]]:

@@ -83,7 +83,7 @@ def test_evaluate_small_run_writes_results_json(tmp_path: Path) -> None:
     assert len(doc["episodes"]) == 6
     ep = doc["episodes"][0]
     assert set(ep) >= {"hour", "seed", "policy", "total_cost", "outstanding_end", "served",
-                       "wait_overhead_per_served", "plan_seconds_per_step", "decisions_sha256"}
+                       "wait_overhead_per_served", "plan_seconds_per_step", "plan_cpu_seconds_per_step", "decisions_sha256"}
     assert "oracle" in proc.stdout and "total cost" in proc.stdout
     assert (tmp_path / "r.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

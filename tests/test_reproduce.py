@@ -104,3 +104,16 @@ def test_the_planning_verdict_compares_rows_timed_on_one_machine() -> None:
     assert ratio == 0.25 and "over the 2 instances of the ablation step" in why and "(slow x2)" in why
     ratio, why = planning_ratio({"main": main, "ablation": {"episodes": []}})
     assert ratio == 2.0 / 3.0 and "may compare machines" in why  # no pair of one machine: said, not hidden
+
+
+def test_the_planning_verdict_prefers_cpu_seconds_where_every_pair_has_them() -> None:
+    from coordinator.report_md import planning_ratio
+
+    # Wall seconds of a run that was paused or shared its cores are inflated; CPU seconds are not.
+    main = {"episodes": [{**_row("surge", s, 5.0, "m x2"), "plan_cpu_seconds_per_step": 1.0} for s in range(2)]
+            + [{**_row("garces2023", s, 5.0, "m x2"), "plan_cpu_seconds_per_step": 2.0} for s in range(2)]}
+    ratio, why = planning_ratio({"main": main, "ablation": {"episodes": []}})
+    assert ratio == 0.5 and "CPU s per step" in why
+    main["episodes"][0].pop("plan_cpu_seconds_per_step")  # one row from before CPU seconds were recorded: wall seconds for all
+    ratio, why = planning_ratio({"main": main, "ablation": {"episodes": []}})
+    assert ratio == 1.0 and "CPU" not in why
