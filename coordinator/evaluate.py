@@ -288,12 +288,21 @@ def upgrade(doc: dict) -> dict:
 
 
 def load_finished(cfg: EvalConfig, path: str | Path) -> list[dict]:
-    """Episodes of an earlier run of the same configuration (any seed count), to resume from."""
+    """Episodes of an earlier run of the same configuration (any seed count), to resume from.
+
+    The run may add policies to the earlier one's: its instances then keep
+    their rows and run only the new labels.  It may not drop any, so that
+    resuming never discards a finished row.
+    """
     doc = read_results(path)
     mine = {k: v for k, v in asdict(cfg).items() if k not in _RESUME_FREE}
     theirs = {k: v for k, v in doc.get("config", {}).items() if k not in _RESUME_FREE}
     if doc.get("reference_oracle") != "oracle":
         raise DataError("was written when 'oracle' was the auction; use another --json", path=path)
+    old = theirs.get("policies", [])
+    if set(old) <= set(mine["policies"]):
+        theirs["policies"] = mine["policies"]
+        mine["policy_options"] = {p: o for p, o in mine["policy_options"].items() if p in old or p in ORACLES}
     for key in mine:
         if mine[key] != theirs.get(key):
             raise DataError(f"was written with {key}={theirs.get(key)!r}, this run has {mine[key]!r}; use another --json", path=path)

@@ -207,3 +207,18 @@ def test_a_checkpoint_missing_some_rows_runs_only_those(small_run: dict, tmp_pat
     timed = {(e["policy"], e["seed"]): e["plan_seconds_per_step"] for e in small_run["episodes"]}
     assert all(e["plan_seconds_per_step"] == timed[(e["policy"], e["seed"])] for e in resumed["episodes"] if e["policy"] != "ia")
     assert read_results(path)["episodes"] == resumed["episodes"]
+
+
+def test_a_resumed_run_may_add_policies_but_not_drop_them(small_run: dict, tmp_path: Path) -> None:
+    path = tmp_path / "run.json"
+    write_json({**small_run, "config": {**small_run["config"], "policies": ["greedy", "oracle"]},
+                "episodes": [e for e in small_run["episodes"] if e["policy"] != "ia"]}, path)
+    wider = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
+    log: list[str] = []
+    resumed = evaluate(wider, progress=log.append, checkpoint=path, resume=True)
+    assert any("2 with some of their rows" in m for m in log)
+    key = lambda e: (e["policy"], e["seed"], e["decisions_sha256"], e["total_cost"])
+    assert list(map(key, resumed["episodes"])) == list(map(key, small_run["episodes"]))
+    narrower = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "oracle"], policy_options=FAST)
+    with pytest.raises(DataError, match="was written with policies="):
+        evaluate(narrower, progress=lambda _msg: None, checkpoint=path, resume=True)
