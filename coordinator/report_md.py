@@ -333,9 +333,7 @@ def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | Non
               "or the true rates but not with previous-hour demand, the information limits it, not the base.", ""]
     lines += paired_rows(abl, [("garces2023", "ia"), ("garces2023:forecast=model", "ia"), ("garces2023:forecast=true-rate", "ia"),
                                ("surge:base=ia", "ia"), ("surge", "greedy"), ("surge:forecast=true-rate", "greedy")])
-    lines += ["", "Over `ia` with the model, `garces2023` differs from `surge:base=ia` in two things: its certainty equivalence "
-              "(standard against limited) and where it samples (the whole map against the taxi's surroundings). "
-              f"`{CE_LABEL}` changes only the first, so these two pairs split the gap between them.", ""]
+    lines += ["", f"`{CE_LABEL}` changes only `garces2023`'s certainty equivalence, so these pairs split its gap to `surge:base=ia`:", ""]
     lines += paired_rows(abl, [(CE_LABEL, "garces2023:forecast=model"), ("surge:base=ia", CE_LABEL)])
     lines += [""] + ia_explanation(abl, CE_LABEL)
     ab = _by(summarize(abl))
