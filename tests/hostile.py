@@ -178,7 +178,7 @@ def attack(a: dict) -> dict:
     block = zenoh.CongestionControl.BLOCK
     pubs = {n: sessions[n].declare_publisher(f"{root}/control/{int(n.split('-')[1])}", congestion_control=block) for n in a["fuzzers"]}
     forge = {n: sessions[n].declare_publisher(f"{root}/control/{victim}", congestion_control=block) for n in a["attackers"]}
-    now, stay, stopped = 0, 0, False
+    now, stay, stopped, answered = 0, 0, False, set()
 
     def forge_all(t: int) -> None:
         for n, p in forge.items():
@@ -199,6 +199,11 @@ def attack(a: dict) -> dict:
             if k.endswith("/state"):
                 now = msg["t"]
                 stay = int.from_bytes(msg["pos"][4 * victim: 4 * victim + 4], "little", signed=True)
+                if now not in answered:  # each attacker hears each state: answer a minute once
+                    answered.add(now)
+                    for name, pub in pubs.items():  # on time whatever the flood's backlog: a control no taxi has, this minute
+                        pub.put(control(now, int(name.split("-")[1]), 10**6))
+                        out["fuzz_controls"] += 1
             elif "/turn/" in k:
                 out["turns_seen"][who] += 1
             forge_all(msg["t"])  # on every state, turn and commitment: before taxi 3 can answer
