@@ -182,6 +182,7 @@ def verdicts(doc: dict, docs: dict) -> list[tuple[str, bool, str]]:
 
 #: The pairs whose planning seconds the verdict may compare, in order of preference: (step, `surge` row, `garces2023` row).
 PLAN_PAIRS = (("main", "surge", "garces2023"),
+              ("ablation", "surge", "garces2023"),
               ("ablation", "surge:forecast=true-rate", "garces2023:forecast=true-rate"),
               ("ablation", "surge:forecast=previous-hour", "garces2023"),
               ("ablation", "surge", "garces2023:forecast=model"))
@@ -193,9 +194,12 @@ def planning_ratio(docs: dict) -> tuple[float, str]:
     A ratio of timings taken on different machines measures the machines, and
     a resumed run may take its rows on several.  So the ratio is taken over
     the instances whose two rows were timed on the same recorded machine, in
-    the pair of :data:`PLAN_PAIRS` with the most of them.  Without such
-    instances (older files record no machine) it is the ratio of all the main
-    run's rows, and says that it may compare machines.
+    the pair of :data:`PLAN_PAIRS` with the most of them.  Wall seconds count
+    the time a shared or paused run waited for the processor and CPU seconds
+    do not, so where some of those instances have CPU seconds in both rows
+    (older rows have none) the ratio is theirs, and says how many they are.
+    Without instances of one machine (older files record no machine) it is
+    the ratio of all the main run's rows, and says that it may compare machines.
     """
     best: tuple[int, str, str, str, list] = (0, "", "", "", [])
     for step, a, b in PLAN_PAIRS:
@@ -206,11 +210,12 @@ def planning_ratio(docs: dict) -> tuple[float, str]:
             best = (len(same), step, a, b, same)
     n, step, a, b, same = best
     if n:
-        cpu = all("plan_cpu_seconds_per_step" in e for pair in same for e in pair)
-        key, kind = ("plan_cpu_seconds_per_step", "CPU s") if cpu else ("plan_seconds_per_step", "s")
-        ta, tb = (float(np.mean([pair[i][key] for pair in same])) for i in (0, 1))
-        machines = ", ".join(sorted({pair[0]["machine"] for pair in same}))
-        return ta / tb, (f"`{a}` {ta:.3f} {kind}, `{b}` {tb:.3f} {kind} per step, over the {n} instances of the {step} step "
+        cpu = [pair for pair in same if all("plan_cpu_seconds_per_step" in e for e in pair)]
+        key, kind, used = ("plan_cpu_seconds_per_step", "CPU s", cpu) if cpu else ("plan_seconds_per_step", "s", same)
+        ta, tb = (float(np.mean([pair[i][key] for pair in used])) for i in (0, 1))
+        machines = ", ".join(sorted({pair[0]["machine"] for pair in used}))
+        which = f"the {n} instances" if len(used) == n else f"the {len(used)} of {n} instances with CPU seconds"
+        return ta / tb, (f"`{a}` {ta:.3f} {kind}, `{b}` {tb:.3f} {kind} per step, over {which} of the {step} step "
                          f"whose two rows were timed on one machine ({machines})")
     main = docs["main"]["episodes"]
     ta, tb = (float(np.mean([e["plan_seconds_per_step"] for e in main if e["policy"] == p])) for p in ("surge", "garces2023"))
@@ -299,7 +304,7 @@ def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | Non
     rows = []
     for doc_name, doc in (("main", main), ("ablation", docs["ablation"])):
         for p in dict.fromkeys(e["policy"] for e in doc["episodes"]):
-            if not p.startswith(("surge", "garces2023")) or (doc_name == "ablation" and p in ("surge", "garces2023")):
+            if not p.startswith(("surge", "garces2023")):
                 continue
             eps = [e for e in doc["episodes"] if e["policy"] == p]
             v = np.array([e["plan_seconds_per_step"] for e in eps])
@@ -309,8 +314,8 @@ def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | Non
             cpu = f"{c.mean():.3f} ± {c.std():.3f} ({len(c)} of {len(eps)})" if len(c) else "not recorded"
             rows.append([f"`{p}`", doc_name, f"{v.mean():.3f} ± {v.std():.3f}", cpu, _ms(paper, 2), machines])
     lines += ["Timings of different machines are not comparable; the verdict compares rows timed on one machine (see above). "
-              "Wall seconds include any time the run waited for the processor; CPU seconds (recorded from session 11 on) do not, "
-              "so the verdict uses them where both rows of every pair have them.", ""]
+              "Wall seconds include any time the run waited for the processor; CPU seconds (not recorded in older rows) do not, "
+              "so the verdict uses the pairs whose two rows have them.", ""]
     lines += _table(["policy", "run", "ours (s/step)", "ours (CPU s/step)", "paper (s/step)", "machines"], rows)
     lines += ["", "## Paired comparisons (instance by instance; 95 % CI by paired bootstrap, 10,000 resamples)", "",
               f"### Headline: `surge` ({'trained model' if run.forecast == 'model' else 'true rates: no predictor in this protocol'}) "

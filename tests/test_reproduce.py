@@ -106,7 +106,7 @@ def test_the_planning_verdict_compares_rows_timed_on_one_machine() -> None:
     assert ratio == 2.0 / 3.0 and "may compare machines" in why  # no pair of one machine: said, not hidden
 
 
-def test_the_planning_verdict_prefers_cpu_seconds_where_every_pair_has_them() -> None:
+def test_the_planning_verdict_prefers_cpu_seconds_where_pairs_have_them() -> None:
     from coordinator.report_md import planning_ratio
 
     # Wall seconds of a run that was paused or shared its cores are inflated; CPU seconds are not.
@@ -114,7 +114,12 @@ def test_the_planning_verdict_prefers_cpu_seconds_where_every_pair_has_them() ->
             + [{**_row("garces2023", s, 5.0, "m x2"), "plan_cpu_seconds_per_step": 2.0} for s in range(2)]}
     ratio, why = planning_ratio({"main": main, "ablation": {"episodes": []}})
     assert ratio == 0.5 and "CPU s per step" in why
-    main["episodes"][0].pop("plan_cpu_seconds_per_step")  # one row from before CPU seconds were recorded: wall seconds for all
+    main["episodes"][0].pop("plan_cpu_seconds_per_step")  # one row from before CPU seconds were recorded: its pair is left out
+    main["episodes"][1]["plan_cpu_seconds_per_step"] = 3.0
+    ratio, why = planning_ratio({"main": main, "ablation": {"episodes": []}})
+    assert ratio == 1.5 and "over the 1 of 2 instances with CPU seconds" in why
+    for e in main["episodes"]:
+        e.pop("plan_cpu_seconds_per_step", None)  # none has them: wall seconds
     ratio, why = planning_ratio({"main": main, "ablation": {"episodes": []}})
     assert ratio == 1.0 and "CPU" not in why
 
