@@ -18,7 +18,9 @@ A policy is named as in the registry, optionally with options:
 ``surge:forecast=true-rate,samples=500``; the whole string labels its rows,
 so one run can compare a policy under several settings.  Long runs resume:
 with a results file, finished instances are kept and each new one is written
-as soon as it ends.
+as soon as it ends; the finished episodes of an unfinished instance wait
+beside it (:func:`episode_dir`), so that an interrupted instance resumes
+from them.
 """
 
 from __future__ import annotations
@@ -133,62 +135,102 @@ def machine() -> str:
     return f"{name} x{os.cpu_count()}"
 
 
-def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict[str, dict] | None = None) -> list[dict]:
+def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict[str, dict] | None = None,
+              keep_to: str | None = None) -> list[dict]:
     """All policies (and both oracles) on one instance; rows for the requested policies.
 
     ``known`` holds rows of this instance already computed under the same
     settings (:func:`borrowable`): they are kept as they are, and with them the
-    oracles' costs, so neither those policies nor the oracles run again.
+    oracles' costs, so neither those policies nor the oracles run again.  The
+    oracles and ``greedy`` run first, so that every other episode's row is
+    whole when it ends: with ``keep_to`` (see :func:`episode_dir`) it is written
+    there at once, and an interrupted instance resumes from its finished episodes.
     """
-    known = known or {}
+    known = dict(known or {})
     scen = _scenario_cache(cfg)
     date = dt.date.fromisoformat(date_text)
     requests = episode_requests(scen.world, date, hour, cfg.minutes)
     start = initial_positions(scen.city, cfg.taxis, seed)
     context = EpisodeContext(city=scen.city, date=date, hour=hour, minutes=cfg.minutes, seed=seed, world=scen.world)
-    labels = [p for p in dict.fromkeys(cfg.policies + ([] if known else list(ORACLES))) if p not in known]
+    first = ([] if known else list(ORACLES)) + (["greedy"] if "greedy" in cfg.policies else [])
+    labels = [p for p in dict.fromkeys(first + cfg.policies) if p not in known]
     results: dict[str, EpisodeResult] = {}
+
+    def total(label: str) -> int:
+        return known[label]["total_cost"] if label in known else results[label].total_cost
+
     for label in labels:
         name, options = parse_policy(label)
         options = {**cfg.policy_options.get(label, {}), **options}
         if "seed" not in options and _takes_rollout_seed(name):
             options["seed"] = instance_seed(date, hour, seed)
         policy = make_policy(name, scen.city, **options)
+        t0 = time.perf_counter()
         results[label] = run_episode(scen.city, policy, requests, start, context)
-    def total(label: str) -> int:
-        return known[label]["total_cost"] if label in known else results[label].total_cost
+        print(f"  {date_text} hour {hour} seed {seed}: {label} {results[label].total_cost} ({time.perf_counter() - t0:.0f} s)",
+              file=sys.stderr, flush=True)
+        some = next(iter(known.values()), None)
+        have_oracles = some is not None or all(o in results for o in ORACLES)
+        have_greedy = "greedy" not in cfg.policies or "greedy" in known or "greedy" in results
+        if not (have_oracles and have_greedy):
+            continue  # a row carries both oracles' costs and greedy's
+        oracles = (some["oracle_cost"], some["oracle_auction_cost"]) if some else (total("oracle"), total("oracle-auction"))
+        greedy = total("greedy") if "greedy" in cfg.policies else None
+        for done in [p for p in results if p in cfg.policies and p not in known]:
+            known[done] = _row(date_text, hour, seed, done, results[done], *oracles, greedy)
+            if keep_to is not None:
+                write_json({"config": asdict(cfg), "row": known[done]}, Path(keep_to) / _episode_file(date_text, hour, seed, done))
+    return [dict(known[name]) for name in cfg.policies]
 
-    some = next(iter(known.values()), None)
-    oracle_cost = some["oracle_cost"] if some else total("oracle")
-    auction_cost = some["oracle_auction_cost"] if some else total("oracle-auction")
-    greedy_cost = total("greedy") if "greedy" in known or "greedy" in results else None
-    rows = []
-    for name in cfg.policies:
-        if name in known:
-            rows.append(dict(known[name]))
+
+def _row(date_text: str, hour: int, seed: int, name: str, r: EpisodeResult, oracle_cost: int, auction_cost: int,
+         greedy_cost: int | None) -> dict:
+    return {
+        "date": date_text,
+        "hour": hour,
+        "seed": seed,
+        "policy": name,
+        "total_cost": r.total_cost,
+        "outstanding_end": r.outstanding_end,
+        "served": r.served,
+        "requests": r.n_requests,
+        "wait_overhead_per_served": (r.total_cost - oracle_cost) / max(r.served, 1),
+        "oracle_cost": oracle_cost,
+        "oracle_auction_cost": auction_cost,
+        "greedy_cost": greedy_cost,
+        "plan_seconds_per_step": float(np.mean(r.plan_seconds)),
+        "plan_cpu_seconds_per_step": float(np.mean(r.plan_cpu_seconds)),
+        "machine": machine(),
+        "decisions_sha256": r.decisions_sha256,
+    }
+
+
+def episode_dir(checkpoint: str | Path) -> Path:
+    """Where the finished episodes of a results file's unfinished instances wait, one small file each, beside it."""
+    checkpoint = Path(checkpoint)
+    return checkpoint.with_name(f"{checkpoint.stem}.episodes")
+
+
+def _episode_file(date_text: str, hour: int, seed: int, label: str) -> str:
+    return f"{date_text}-{hour}-{seed}-{hashlib.sha256(label.encode()).hexdigest()[:12]}.json"
+
+
+def kept_episodes(cfg: EvalConfig, folder: Path, warn: Callable[[str], None]) -> dict[tuple[str, int, int], dict[str, dict]]:
+    """The rows in ``folder`` that ``cfg`` would compute identically (:func:`borrowable`), by instance; a broken file is named and skipped."""
+    out: dict[tuple[str, int, int], dict[str, dict]] = {}
+    for path in sorted(folder.glob("*.json")) if folder.is_dir() else []:
+        try:
+            saved = json.loads(path.read_text())
+            doc = {"config": saved["config"], "episodes": [saved["row"]]}
+            missing = [f for f in ("date", *_EPISODE_FIELDS) if f not in saved["row"]]
+            if missing:
+                raise KeyError(missing[0])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            warn(f"{path}: not a finished episode ({type(exc).__name__}: {exc}); it runs again")
             continue
-        r = results[name]
-        rows.append(
-            {
-                "date": date_text,
-                "hour": hour,
-                "seed": seed,
-                "policy": name,
-                "total_cost": r.total_cost,
-                "outstanding_end": r.outstanding_end,
-                "served": r.served,
-                "requests": r.n_requests,
-                "wait_overhead_per_served": (r.total_cost - oracle_cost) / max(r.served, 1),
-                "oracle_cost": oracle_cost,
-                "oracle_auction_cost": auction_cost,
-                "greedy_cost": greedy_cost,
-                "plan_seconds_per_step": float(np.mean(r.plan_seconds)),
-                "plan_cpu_seconds_per_step": float(np.mean(r.plan_cpu_seconds)),
-                "machine": machine(),
-                "decisions_sha256": r.decisions_sha256,
-            }
-        )
-    return rows
+        for key, rows in borrowable(cfg, doc).items():
+            out.setdefault(key, {}).update(rows)
+    return out
 
 
 def _instance_task(task: tuple) -> list[dict]:
@@ -349,7 +391,11 @@ def evaluate(
     # Seed by seed across the dates and hours, so that a run cut short has every hour at the same depth.
     tasks = [(d, h, s) for s in range(cfg.seeds) for d in cfg.dates for h in cfg.hours if (d, h, s) not in done]
     lent = borrowable(cfg, borrow) if borrow else {}
-    for key, rows in pending.items():
+    keep_to = episode_dir(checkpoint) if checkpoint is not None and not cfg.cluster else None
+    kept = kept_episodes(cfg, keep_to, progress) if keep_to is not None and resume else {}
+    if any(t in kept for t in tasks):
+        progress(f"{sum(len(kept[t]) for t in tasks if t in kept)} finished episodes of unfinished instances are kept ({keep_to})")
+    for key, rows in [*kept.items(), *pending.items()]:
         lent[key] = {**lent.get(key, {}), **rows}
     lent_rows = sum(len(lent.get(t, {})) for t in tasks)
     if lent_rows:
@@ -370,23 +416,34 @@ def evaluate(
     def report(k: int, rows: list[dict]) -> None:
         pending.pop(_key(rows[0]), None)
         episodes.extend(rows)
+        head = rows[0]
         if checkpoint is not None:
             write_json(document(), checkpoint)
-        head = rows[0]
+            if keep_to is not None:
+                for path in keep_to.glob(f"{head['date']}-{head['hour']}-{head['seed']}-*.json"):
+                    path.unlink()
         costs = " ".join(f"{r['policy']}={r['total_cost']}" for r in rows)
         progress(f"[{k}/{len(tasks)}] {head['date']} hour {head['hour']} seed {head['seed']}: {costs} ({time.perf_counter() - t0:.1f} s)")
 
-    with contextlib.closing(run_instances(cfg, tasks, lent)) as results:  # closed at once on any error: workers stop
+    if keep_to is not None:
+        keep_to.mkdir(parents=True, exist_ok=True)
+    with contextlib.closing(run_instances(cfg, tasks, lent, keep_to)) as results:  # closed at once on any error: workers stop
         for k, rows in enumerate(results, 1):
             report(k, rows)
+    if keep_to is not None:
+        with contextlib.suppress(OSError):
+            keep_to.rmdir()  # all finished; a file it still holds (another run's) keeps it
     return document()
 
 
-def run_instances(cfg: EvalConfig, tasks: list[tuple[str, int, int]], known: dict | None = None) -> Iterator[list[dict]]:
+def run_instances(cfg: EvalConfig, tasks: list[tuple[str, int, int]], known: dict | None = None,
+                  keep_to: Path | None = None) -> Iterator[list[dict]]:
     """The rows of each ``(date, hour, seed)`` instance, in task order: in this process, in a pool of
-    ``cfg.jobs`` worker processes, or on the Dask cluster at ``cfg.cluster``; ``known`` rows by instance are kept."""
+    ``cfg.jobs`` worker processes, or on the Dask cluster at ``cfg.cluster``; ``known`` rows by instance are kept,
+    and each finished episode is written to ``keep_to`` (not on a cluster, whose workers may be other machines)."""
     known = known or {}
-    work = [(cfg, *t, known.get(t)) for t in tasks]
+    keep = None if keep_to is None or cfg.cluster else str(keep_to)
+    work = [(cfg, *t, known.get(t), keep) for t in tasks]
     if cfg.cluster:
         from coordinator.cluster import run_on_cluster
 

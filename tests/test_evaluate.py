@@ -222,3 +222,27 @@ def test_a_resumed_run_may_add_policies_but_not_drop_them(small_run: dict, tmp_p
     narrower = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "oracle"], policy_options=FAST)
     with pytest.raises(DataError, match="was written with policies="):
         evaluate(narrower, progress=lambda _msg: None, checkpoint=path, resume=True)
+
+
+def test_an_interrupted_instance_resumes_from_its_finished_episodes(small_run: dict, tmp_path: Path) -> None:
+    from coordinator.evaluate import _instance, episode_dir
+
+    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
+    path = tmp_path / "run.json"
+    folder = episode_dir(path)
+    folder.mkdir()
+    _instance(cfg, "2022-11-17", 19, 1, None, str(folder))  # seed 1 ran whole, but the run stopped before writing it
+    files = sorted(folder.glob("2022-11-17-19-1-*.json"))
+    assert len(files) == 3
+    ia = next(f for f in files if json.loads(f.read_text())["row"]["policy"] == "ia")
+    ia.unlink()  # stopped during ia: its row was never written
+    (folder / "2022-11-17-19-0-broken.json").write_text("{not json")
+    saved = {json.loads(f.read_text())["row"]["policy"]: json.loads(f.read_text())["row"] for f in files if f.exists()}
+    log: list[str] = []
+    resumed = evaluate(cfg, progress=log.append, checkpoint=path, resume=True)
+    assert any("broken.json: not a finished episode" in m for m in log)
+    assert any("2 finished episodes of unfinished instances are kept" in m for m in log)
+    key = lambda e: (e["policy"], e["seed"], e["decisions_sha256"], e["total_cost"], e["oracle_cost"], e["greedy_cost"])
+    assert list(map(key, resumed["episodes"])) == list(map(key, small_run["episodes"]))
+    assert [e for e in resumed["episodes"] if e["seed"] == 1 and e["policy"] != "ia"] == [saved["greedy"], saved["oracle"]]  # kept, not rerun
+    assert not folder.exists()  # every instance finished: their files, the broken one too, and the folder are gone
