@@ -182,7 +182,6 @@ def verdicts(doc: dict, docs: dict) -> list[tuple[str, bool, str]]:
 
 #: The pairs whose planning seconds the verdict may compare, in order of preference: (step, `surge` row, `garces2023` row).
 PLAN_PAIRS = (("main", "surge", "garces2023"),
-              ("ablation", "surge", "garces2023"),
               ("ablation", "surge:forecast=true-rate", "garces2023:forecast=true-rate"),
               ("ablation", "surge:forecast=previous-hour", "garces2023"),
               ("ablation", "surge", "garces2023:forecast=model"))
@@ -304,8 +303,8 @@ def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | Non
     rows = []
     for doc_name, doc in (("main", main), ("ablation", docs["ablation"])):
         for p in dict.fromkeys(e["policy"] for e in doc["episodes"]):
-            if not p.startswith(("surge", "garces2023")):
-                continue
+            if not p.startswith(("surge", "garces2023")) or (doc_name == "ablation" and p in ("surge", "garces2023")):
+                continue  # the ablation's own surge and garces2023 rows are the main run's, lent
             eps = [e for e in doc["episodes"] if e["policy"] == p]
             v = np.array([e["plan_seconds_per_step"] for e in eps])
             c = np.array([e["plan_cpu_seconds_per_step"] for e in eps if "plan_cpu_seconds_per_step" in e])
