@@ -154,6 +154,7 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
     context = EpisodeContext(city=scen.city, date=date, hour=hour, minutes=cfg.minutes, seed=seed, world=scen.world)
     first = ([] if known else list(ORACLES)) + (["greedy"] if "greedy" in cfg.policies else [])
     labels = [p for p in dict.fromkeys(first + cfg.policies) if p not in known]
+    runs_first = [p for p in dict.fromkeys(first) if p not in known]
     results: dict[str, EpisodeResult] = {}
 
     def total(label: str) -> int:
@@ -169,11 +170,9 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
         results[label] = run_episode(scen.city, policy, requests, start, context)
         print(f"  {date_text} hour {hour} seed {seed}: {label} {results[label].total_cost} ({time.perf_counter() - t0:.0f} s)",
               file=sys.stderr, flush=True)
-        some = next(iter(known.values()), None)
-        have_oracles = some is not None or all(o in results for o in ORACLES)
-        have_greedy = "greedy" not in cfg.policies or "greedy" in known or "greedy" in results
-        if not (have_oracles and have_greedy):
+        if any(p not in results for p in runs_first):
             continue  # a row carries both oracles' costs and greedy's
+        some = next(iter(known.values()), None)
         oracles = (some["oracle_cost"], some["oracle_auction_cost"]) if some else (total("oracle"), total("oracle-auction"))
         greedy = total("greedy") if "greedy" in cfg.policies else None
         for done in [p for p in results if p in cfg.policies and p not in known]:
@@ -211,8 +210,18 @@ def episode_dir(checkpoint: str | Path) -> Path:
     return checkpoint.with_name(f"{checkpoint.stem}.episodes")
 
 
+def _instance_prefix(date_text: str, hour: int, seed: int) -> str:
+    """The start of every kept-episode file name of one instance."""
+    return f"{date_text}-{hour}-{seed}-"
+
+
 def _episode_file(date_text: str, hour: int, seed: int, label: str) -> str:
-    return f"{date_text}-{hour}-{seed}-{hashlib.sha256(label.encode()).hexdigest()[:12]}.json"
+    return f"{_instance_prefix(date_text, hour, seed)}{hashlib.sha256(label.encode()).hexdigest()[:12]}.json"
+
+
+def _missing_field(ep: object) -> str | None:
+    """The first field of :data:`_EPISODE_FIELDS` that episode row ``ep`` lacks, if any."""
+    return next((f for f in _EPISODE_FIELDS if not isinstance(ep, dict) or f not in ep), None)
 
 
 def kept_episodes(cfg: EvalConfig, folder: Path, warn: Callable[[str], None]) -> dict[tuple[str, int, int], dict[str, dict]]:
@@ -222,9 +231,9 @@ def kept_episodes(cfg: EvalConfig, folder: Path, warn: Callable[[str], None]) ->
         try:
             saved = json.loads(path.read_text())
             doc = {"config": saved["config"], "episodes": [saved["row"]]}
-            missing = [f for f in ("date", *_EPISODE_FIELDS) if f not in saved["row"]]
+            missing = "date" if "date" not in saved["row"] else _missing_field(saved["row"])
             if missing:
-                raise KeyError(missing[0])
+                raise KeyError(missing)
         except (OSError, ValueError, KeyError, TypeError) as exc:
             warn(f"{path}: not a finished episode ({type(exc).__name__}: {exc}); it runs again")
             continue
@@ -308,9 +317,9 @@ def read_results(path: str | Path) -> dict:
         if key not in doc:
             raise DataError(f"no {key!r} field", path=path)
     for k, ep in enumerate(doc["episodes"]):
-        missing = [f for f in _EPISODE_FIELDS if not isinstance(ep, dict) or f not in ep]
+        missing = _missing_field(ep)
         if missing:
-            raise DataError(f"episode {k} has no {missing[0]!r} field", path=path)
+            raise DataError(f"episode {k} has no {missing!r} field", path=path)
     return upgrade(doc)
 
 
@@ -420,7 +429,7 @@ def evaluate(
         if checkpoint is not None:
             write_json(document(), checkpoint)
             if keep_to is not None:
-                for path in keep_to.glob(f"{head['date']}-{head['hour']}-{head['seed']}-*.json"):
+                for path in keep_to.glob(_instance_prefix(head["date"], head["hour"], head["seed"]) + "*.json"):
                     path.unlink()
         costs = " ".join(f"{r['policy']}={r['total_cost']}" for r in rows)
         progress(f"[{k}/{len(tasks)}] {head['date']} hour {head['hour']} seed {head['seed']}: {costs} ({time.perf_counter() - t0:.1f} s)")
