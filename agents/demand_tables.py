@@ -38,7 +38,7 @@ class DemandTables:
 
     @classmethod
     def build(cls, city: City, forecast: Forecast, ce: str, seed: int) -> DemandTables:
-        """Tables of ``forecast``: the distributions themselves (limited CE) or per-sector pools (standard CE)."""
+        """Tables of ``forecast``: per-sector pools under standard CE, the distributions themselves otherwise (``limited``, ``counts``)."""
         S, n = city.n_sectors, city.n_nodes
         if forecast.n_sectors != S or forecast.rho.shape[0] != n:
             raise ConfigError(f"forecast has {forecast.n_sectors} sectors and {forecast.rho.shape[0]} nodes; the city has {S} and {n}")

@@ -23,6 +23,9 @@ requests) and δ (drop-offs, about the hour's expected drop-offs).  Each
 sample draws every request's pickup from its sector's pool, its drop-off
 sector from β and its drop-off from that sector's pool, independently, so β
 and the order in which requests arrive stay stochastic.
+``ce=counts`` keeps the deterministic counts and draws the places from ρ, β
+and δ themselves, as limited certainty equivalence does: between the three,
+the counts and the pools are told apart.
 
 Determinism: an agent's decision is a pure function of the observation, its
 predecessors' committed controls, its index, the forecast, the seed and

@@ -9,7 +9,8 @@ from city.errors import ConfigError
 
 BASES = {"greedy": K.GREEDY, "ia": K.IA}
 SCOPES = ("local", "map")
-CE_MODES = {"limited": K.LIMITED_CE, "standard": K.STANDARD_CE}
+#: Certainty equivalence by name, and the arrival counts each samples; only ``standard`` draws places from pools.
+CE_MODES = {"limited": K.LIMITED_CE, "standard": K.STANDARD_CE, "counts": K.STANDARD_CE}
 #: Nearest tracked requests listed per node; searches past them scan all tracked requests.
 NEAR_K = 8
 
@@ -30,7 +31,10 @@ class RolloutConfig:
         Where future requests are sampled: ``local`` (the agent's sector and
         its adjacent sectors) or ``map`` (every sector).
     ce : str
-        Certainty equivalence: ``limited`` (surge) or ``standard`` (Garces et al.).
+        Certainty equivalence: ``limited`` (surge) or ``standard`` (Garces et
+        al.: deterministic counts, places from fixed per-sector pools).
+        ``counts`` takes standard's deterministic counts and limited's places
+        (drawn from ρ and δ), to tell the two parts apart.
     seed : int
         Seed of every decision's random numbers.
     prune : int or None

@@ -2,6 +2,7 @@
 
 The design card has each taxi subscribe to the demand forecasts of its local
 sectors.  A rollout with local scope and limited certainty equivalence
+(or with ``counts``, its deterministic counts drawn sector by sector)
 samples arrivals only in the deciding taxi's sector and the sectors next to
 it, and drop-offs anywhere; so the taxi follows ``forecast/<s>`` of those
 sectors and the map-wide ``dropoffs``, and builds its demand tables from
@@ -38,10 +39,10 @@ FETCH_TIMEOUT_S = 5.0
 def needed_sectors(city: City, config: RolloutConfig, node: int) -> np.ndarray:
     """The sectors whose forecast a decision at ``node`` reads (ascending).
 
-    The local sectors for local scope with limited certainty equivalence;
-    every sector otherwise (see the module docstring).
+    The local sectors for local scope without standard certainty
+    equivalence's pools; every sector otherwise (see the module docstring).
     """
-    if config.scope == "local" and config.ce == "limited":
+    if config.scope == "local" and config.ce != "standard":
         return city.local_sectors(int(city.node_sector[node]))
     return np.arange(city.n_sectors)
 

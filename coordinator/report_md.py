@@ -125,15 +125,17 @@ def _effect(doc: dict, a: str, b: str) -> tuple[str, list[bool]]:
     return "; ".join(parts) or "no instance yet", better
 
 
-def ia_explanation(abl: dict, ce_label: str) -> list[str]:
+def ia_explanation(abl: dict, counts_label: str, limited_label: str) -> list[str]:
     """Why rollout over ``ia`` gains little, read from the ablation: each of ``garces2023``'s differences from
-    ``surge:base=ia`` (information, certainty equivalence, sampling scope) as a paired effect, and which of them
-    is clear (CI below zero at every ablation hour)."""
+    ``surge:base=ia`` (information, the two parts of certainty equivalence, sampling scope) as a paired effect,
+    and which of them is clear (CI below zero at every ablation hour)."""
     steps = [("the forecast (model against previous hour)", "garces2023:forecast=model", "garces2023"),
-             ("limited certainty equivalence (against standard)", ce_label, "garces2023:forecast=model"),
-             ("local sampling (against the whole map)", "surge:base=ia", ce_label)]
+             ("places drawn from the distributions (against standard certainty equivalence's fixed pools)", counts_label,
+              "garces2023:forecast=model"),
+             ("random counts (against standard certainty equivalence's deterministic means)", limited_label, counts_label),
+             ("local sampling (against the whole map)", "surge:base=ia", limited_label)]
     lines = ["Finding, computed from the rows above: `garces2023` and `surge:base=ia` share the base `ia` and differ in "
-             "three things. Each row changes one of them (relative change of total cost, 95 % CI of the mean cost difference, wins):", ""]
+             "four things. Each row changes one of them (relative change of total cost, 95 % CI of the mean cost difference, wins):", ""]
     clear = []
     for what, a, b in steps:
         text, better = _effect(abl, a, b)
@@ -142,7 +144,7 @@ def ia_explanation(abl: dict, ce_label: str) -> list[str]:
             clear.append(what)
     text, gain = _effect(abl, "surge:base=ia", "ia")
     lines += [f"- rollout planning as `surge` does, against its base: `surge:base=ia` − `ia`: {text}.", ""]
-    named = f"clear at every ablation hour: {', '.join(clear)}" if clear else "none of the three differences is clear at every hour"
+    named = f"clear at every ablation hour: {', '.join(clear)}" if clear else "none of the four differences is clear at every hour"
     if not gain:
         lines.append("No instance has these rows yet.")
     elif all(gain):
@@ -264,7 +266,7 @@ def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | Non
     ``status`` (one line per step: instances done of those planned) marks an
     interim report, written from the results of a run still under way.
     """
-    from coordinator.reproduce import CE_LABEL, pruning_pairs
+    from coordinator.reproduce import CE_LABELS, pruning_pairs
 
     out = run.out
     main = complete_seeds(docs["main"])
@@ -337,9 +339,11 @@ def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | Non
               "or the true rates but not with previous-hour demand, the information limits it, not the base.", ""]
     lines += paired_rows(abl, [("garces2023", "ia"), ("garces2023:forecast=model", "ia"), ("garces2023:forecast=true-rate", "ia"),
                                ("surge:base=ia", "ia"), ("surge", "greedy"), ("surge:forecast=true-rate", "greedy")])
-    lines += ["", f"`{CE_LABEL}` changes only `garces2023`'s certainty equivalence, so these pairs split its gap to `surge:base=ia`:", ""]
-    lines += paired_rows(abl, [(CE_LABEL, "garces2023:forecast=model"), ("surge:base=ia", CE_LABEL)])
-    lines += [""] + ia_explanation(abl, CE_LABEL)
+    counts, limited = CE_LABELS
+    lines += ["", f"`{counts}` changes one part of `garces2023`'s certainty equivalence (places drawn from the distributions, "
+              f"not fixed pools) and `{limited}` both (random counts as well), so these pairs split its gap to `surge:base=ia`:", ""]
+    lines += paired_rows(abl, [(counts, "garces2023:forecast=model"), (limited, counts), ("surge:base=ia", limited)])
+    lines += [""] + ia_explanation(abl, counts, limited)
     ab = _by(summarize(abl))
     lines += ["", "Table 4 beside the paper's (total cost of our approach with each base policy; the paper's printed scale differs from its Table 1, so compare the ratio):", ""]
     lines += _table(["hour", "ours: base ia", "ours: base greedy", "ours ia / greedy", "paper: base ia", "paper: base greedy", "paper ia / greedy"],

@@ -12,7 +12,8 @@ Steps, each showing progress on stderr:
    with evening events, 10 initial states each;
 5. the ablations on 10 seeds at 17 and 19 h: both rollout policies with the
    same information (previous hour, the model, true rates), surge with base
-   ``ia``, surge sampling the whole map, and pruning off for both (pruned and
+   ``ia``, surge sampling the whole map, garces2023 with the model and each
+   part of surge's certainty equivalence (:data:`CE_LABELS`), and pruning off for both (pruned and
    unpruned at the protocol's ``prune_samples``); the main
    policies' rows and the oracles of these instances are taken from step 3;
 6. ``OUT/REPORT.md`` with its figures (:mod:`coordinator.report_md`).
@@ -91,10 +92,13 @@ ABLATIONS = (
     "surge:base=ia",
     "surge:scope=map",
     "garces2023:forecast=model,ce=limited",
+    "garces2023:forecast=model,ce=counts",
 )
-#: ``garces2023`` with the model and ``surge``'s limited certainty equivalence: between it, ``garces2023:forecast=model``
-#: and ``surge:base=ia`` the certainty equivalence and the sampling scope are told apart.
-CE_LABEL = ABLATIONS[-1]
+#: ``garces2023`` with the model, its standard certainty equivalence changed in one part and then in both: places
+#: drawn from the distributions instead of fixed pools (``counts``), and then random counts as well (``limited``,
+#: ``surge``'s). Between them, ``garces2023:forecast=model`` and ``surge:base=ia``, the pools, the counts and the
+#: sampling scope are told apart.
+CE_LABELS = ("garces2023:forecast=model,ce=counts", "garces2023:forecast=model,ce=limited")
 
 
 def pruning_pairs(protocol: Protocol) -> list[tuple[str, str]]:

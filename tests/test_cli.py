@@ -33,7 +33,7 @@ def run_cli(*args: str) -> subprocess.CompletedProcess:
         (["evaluate", "--policies", "surge:prune=-1"], "prune takes an integer of at least 0 or auto or none"),
         (["evaluate", "--policies", "surge:forecast=crystal-ball"], "forecast takes one of model, previous-hour, true-rate"),
         (["evaluate", "--policies", "oracle-auction:window=1.5"], "policy 'oracle-auction': option window='1.5' is not accepted"),
-        (["fleet", "--policy", "garces2023:ce=fuzzy"], "policy 'garces2023': option ce='fuzzy' is not accepted; ce takes one of limited, standard"),
+        (["fleet", "--policy", "garces2023:ce=fuzzy"], "policy 'garces2023': option ce='fuzzy' is not accepted; ce takes one of limited, standard, counts"),
         (["evaluate", "--resume"], "--resume needs --json"),
         (["fleet", "--policy", "greedy"], "the distributed runtime runs rollout policies"),
         (["fleet", "--deadline", "0"], "--deadline and --join-timeout must be positive"),

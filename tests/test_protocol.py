@@ -76,16 +76,17 @@ def test_a_taxi_plans_on_its_local_sectors_exactly_as_on_the_whole_forecast() ->
     fc = forecast(city, np.random.default_rng(4))
     obs = seeded_state(city, 2, taxis=30, requests=40)
     surge = RolloutConfig(horizon=5, samples=24)
-    whole = prepare_step(city, surge, obs, DemandTables.build(city, fc, surge.ce, surge.seed), 7)
     free = np.flatnonzero(obs.tau == 0)[:6]
-    for agent in free.tolist():
-        sectors = needed_sectors(city, surge, int(obs.pos[agent]))
-        assert 0 < sectors.size < city.n_sectors  # local sectors only
-        store = _pieces(city, fc, surge, sectors)
-        assert store.missing(0, sectors) == [] and store.tables(0, np.arange(city.n_sectors)) is None
-        local = prepare_step(city, surge, obs, store.tables(0, sectors), 7)
-        committed = whole.base_controls[:agent]
-        np.testing.assert_array_equal(agent_costs(local, committed, agent)[1], agent_costs(whole, committed, agent)[1])
+    for cfg in (surge, dataclasses.replace(surge, ce="counts")):  # standard's counts draw sector by sector too
+        whole = prepare_step(city, cfg, obs, DemandTables.build(city, fc, cfg.ce, cfg.seed), 7)
+        for agent in free.tolist():
+            sectors = needed_sectors(city, cfg, int(obs.pos[agent]))
+            assert 0 < sectors.size < city.n_sectors  # local sectors only
+            store = _pieces(city, fc, cfg, sectors)
+            assert store.missing(0, sectors) == [] and store.tables(0, np.arange(city.n_sectors)) is None
+            local = prepare_step(city, cfg, obs, store.tables(0, sectors), 7)
+            committed = whole.base_controls[:agent]
+            np.testing.assert_array_equal(agent_costs(local, committed, agent)[1], agent_costs(whole, committed, agent)[1])
     # a planner with standard certainty equivalence or map scope follows every sector
     for cfg in (RolloutConfig(ce="standard", base="ia", scope="map"), dataclasses.replace(surge, ce="standard")):
         assert needed_sectors(city, cfg, int(obs.pos[0])).tolist() == list(range(city.n_sectors))

@@ -126,15 +126,16 @@ def test_the_planning_verdict_prefers_cpu_seconds_where_pairs_have_them() -> Non
 
 def test_the_ia_explanation_names_only_differences_clear_at_every_hour() -> None:
     from coordinator.report_md import ia_explanation
-    from coordinator.reproduce import CE_LABEL
+    from coordinator.reproduce import CE_LABELS
 
-    costs = {"ia": 100, "garces2023": 99, "garces2023:forecast=model": 99, CE_LABEL: 90, "surge:base=ia": 89}
+    counts, limited = CE_LABELS
+    costs = {"ia": 100, "garces2023": 99, "garces2023:forecast=model": 99, counts: 99, limited: 90, "surge:base=ia": 89}
     rows = [{"date": "2022-11-17", "hour": h, "seed": s, "policy": p, "total_cost": c + s % 3 + (h == 19) * (p == "surge:base=ia") * 20,
              "outstanding_end": 0, "served": 10, "wait_overhead_per_served": float(c), "plan_seconds_per_step": 0.0,
              "oracle_cost": 0, "oracle_auction_cost": 0}
             for h in (17, 19) for s in range(6) for p, c in costs.items()]
-    text = "\n".join(ia_explanation({"episodes": rows}, CE_LABEL))
-    assert "clear at every ablation hour: limited certainty equivalence" in text
+    text = "\n".join(ia_explanation({"episodes": rows}, *CE_LABELS))
+    assert "clear at every ablation hour: random counts" in text  # not the places: counts − model is 0
     assert "local sampling" in text.split("clear at every ablation hour:")[0]  # listed as a row, not as clear (worse at 19 h)
     assert "does not gain clearly at every hour" in text  # surge:base=ia is +9 at 19 h
-    assert ia_explanation({"episodes": []}, CE_LABEL)[-1] == "No instance has these rows yet."
+    assert ia_explanation({"episodes": []}, *CE_LABELS)[-1] == "No instance has these rows yet."

@@ -116,7 +116,8 @@ def reference_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
 
 @pytest.mark.parametrize(
     "base,ce,scope",
-    [("greedy", "limited", "local"), ("ia", "standard", "map"), ("greedy", "standard", "map"), ("ia", "limited", "local")],
+    [("greedy", "limited", "local"), ("ia", "standard", "map"), ("greedy", "standard", "map"), ("ia", "limited", "local"),
+     ("ia", "counts", "map"), ("greedy", "counts", "local")],
 )
 def test_rollout_costs_equal_exhaustive_simulation(base: str, ce: str, scope: str) -> None:
     city = grid_city(5, 4)
@@ -184,6 +185,25 @@ def test_standard_ce_pools_are_fixed_and_sized_by_the_mean() -> None:
     again = DemandTables.build(city, fc, "standard", seed=3)
     np.testing.assert_array_equal(tab.pk_node, again.pk_node)
     assert np.all(city.node_sector[tab.pk_node] == np.repeat(np.arange(4), np.diff(tab.pk_ptr)))
+
+
+def test_counts_ce_has_standard_counts_and_limited_places() -> None:
+    # A sector at 0.1 requests a minute: standard's pool holds 6 nodes for the hour, while
+    # ``counts`` draws from every pickup node of the sector, with standard's deterministic count.
+    city = grid_city(6, 6)
+    fc = uniform_forecast(city, [0.1, 0.0, 0.0, 0.0])
+    counts = DemandTables.build(city, fc, "counts", seed=3)
+    limited = DemandTables.build(city, fc, "limited", seed=3)
+    for a, b in zip(dataclasses.astuple(counts), dataclasses.astuple(limited)):
+        np.testing.assert_array_equal(a, b)
+    assert np.diff(DemandTables.build(city, fc, "standard", seed=3).pk_ptr)[0] == 6
+    assert np.diff(counts.pk_ptr)[0] == np.count_nonzero(city.node_sector == 0) > 6
+    ap, ad, ast = (np.empty(64, np.int32) for _ in range(3))
+    for s in range(20):
+        n = K.sample_arrivals(np.uint64(7), s, 10, 0, CE_MODES["counts"], np.arange(4), counts.eta, counts.pk_ptr, counts.pk_node,
+                              counts.pk_cum, counts.dk_ptr, counts.dk_node, counts.dk_cum, counts.beta_cum, np.ones(city.n_nodes, bool),
+                              ap, ad, ast)
+        assert list(ast[:n]) == [4]  # in every sample, as ⌊0.1 (m + 1) + ½⌋ first reaches 1 in minute m = 4
 
 
 def test_common_random_numbers_across_candidate_controls() -> None:
