@@ -113,15 +113,21 @@ def paired_rows(doc: dict, pairs: list[tuple[str, str]]) -> list[str]:
     return _table(["hour", "pair (a − b)", "a wins", "mean cost diff", "95 % CI (paired bootstrap)", "relative", "wait overhead/served", "served"], rows)
 
 
+#: Instances an hour needs before a paired effect there is judged clear: a bootstrap over fewer resamples a handful of values.
+MIN_CLEAR = 5
+
+
 def _effect(doc: dict, a: str, b: str) -> tuple[str, list[bool]]:
-    """``a`` − ``b`` at each hour as text, and per hour whether ``a`` is better with its 95 % CI below zero."""
+    """``a`` − ``b`` at each hour as text, and per hour whether ``a`` is better with its 95 % CI below zero
+    over at least :data:`MIN_CLEAR` instances."""
     parts, better = [], []
     for h in sorted({e["hour"] for e in doc["episodes"]}):
         r = compare_pair(doc, a, b, h)
         if r is None:
             continue
-        parts.append(f"{h} h {_pct(r['relative_difference'])} [{r['ci95'][0]:+.0f}, {r['ci95'][1]:+.0f}], {r['wins']}/{r['n']} wins")
-        better.append(r["ci95"][1] < 0)
+        few = f" (fewer than {MIN_CLEAR}: not judged)" if r["n"] < MIN_CLEAR else ""
+        parts.append(f"{h} h {_pct(r['relative_difference'])} [{r['ci95'][0]:+.0f}, {r['ci95'][1]:+.0f}], {r['wins']}/{r['n']} wins{few}")
+        better.append(r["n"] >= MIN_CLEAR and r["ci95"][1] < 0)
     return "; ".join(parts) or "no instance yet", better
 
 

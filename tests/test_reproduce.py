@@ -139,3 +139,6 @@ def test_the_ia_explanation_names_only_differences_clear_at_every_hour() -> None
     assert "local sampling" in text.split("clear at every ablation hour:")[0]  # listed as a row, not as clear (worse at 19 h)
     assert "does not gain clearly at every hour" in text  # surge:base=ia is +9 at 19 h
     assert ia_explanation({"episodes": []}, *CE_LABELS)[-1] == "No instance has these rows yet."
+    few = [e for e in rows if e["seed"] < 4]  # 4 instances an hour: too few to call any effect clear
+    text = "\n".join(ia_explanation({"episodes": few}, *CE_LABELS))
+    assert "none of the four differences is clear at every hour" in text and "fewer than 5: not judged" in text
