@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agents.rollout_config import POOLED_CE
 from city.errors import ConfigError
 from city.forecast import Forecast
 from city.graph import City
@@ -47,7 +48,7 @@ class DemandTables:
         eta = np.where(has_nodes, forecast.eta, 0.0)
         beta = np.where(has_nodes[None, :], forecast.beta, 0.0)
         beta = np.where(beta.sum(1, keepdims=True) > 0, beta, has_nodes[None, :].astype(np.float64))
-        if ce == "standard":
+        if ce in POOLED_CE:
             rng = np.random.default_rng([seed, 2023])
             drop_expect = 60.0 * (eta @ (beta / beta.sum(1, keepdims=True)))
             pick = _pools(city, forecast.rho, np.maximum(1, np.rint(60.0 * eta)).astype(np.int64), rng)

@@ -9,8 +9,10 @@ from city.errors import ConfigError
 
 BASES = {"greedy": K.GREEDY, "ia": K.IA}
 SCOPES = ("local", "map")
-#: Certainty equivalence by name, and the arrival counts each samples; only ``standard`` draws places from pools.
+#: Certainty equivalence by name, and the arrival counts each samples.
 CE_MODES = {"limited": K.LIMITED_CE, "standard": K.STANDARD_CE, "counts": K.STANDARD_CE}
+#: The certainty equivalences that draw places from fixed per-sector pools (one random stream over every sector).
+POOLED_CE = ("standard",)
 #: Nearest tracked requests listed per node; searches past them scan all tracked requests.
 NEAR_K = 8
 

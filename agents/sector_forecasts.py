@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from agents.demand_tables import DemandTables
-from agents.rollout_config import RolloutConfig
+from agents.rollout_config import POOLED_CE, RolloutConfig
 from bus.checks import Bounds, Rejections, check_dropoffs, check_forecast, check_sector_forecast
 from bus.keys import Keys
 from bus.session import Inbox
@@ -42,7 +42,7 @@ def needed_sectors(city: City, config: RolloutConfig, node: int) -> np.ndarray:
     The local sectors for local scope without standard certainty
     equivalence's pools; every sector otherwise (see the module docstring).
     """
-    if config.scope == "local" and config.ce != "standard":
+    if config.scope == "local" and config.ce not in POOLED_CE:
         return city.local_sectors(int(city.node_sector[node]))
     return np.arange(city.n_sectors)
 

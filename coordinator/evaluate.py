@@ -219,9 +219,12 @@ def _episode_file(date_text: str, hour: int, seed: int, label: str) -> str:
     return f"{_instance_prefix(date_text, hour, seed)}{hashlib.sha256(label.encode()).hexdigest()[:12]}.json"
 
 
-def _missing_field(ep: object) -> str | None:
-    """The first field of :data:`_EPISODE_FIELDS` that episode row ``ep`` lacks, if any."""
-    return next((f for f in _EPISODE_FIELDS if not isinstance(ep, dict) or f not in ep), None)
+_EPISODE_FIELDS = ("hour", "seed", "policy", "oracle_cost", *METRICS)
+
+
+def _missing_field(ep: object, fields: tuple[str, ...] = _EPISODE_FIELDS) -> str | None:
+    """The first of ``fields`` that episode row ``ep`` lacks, if any."""
+    return next((f for f in fields if not isinstance(ep, dict) or f not in ep), None)
 
 
 def kept_episodes(cfg: EvalConfig, folder: Path, warn: Callable[[str], None]) -> dict[tuple[str, int, int], dict[str, dict]]:
@@ -231,7 +234,7 @@ def kept_episodes(cfg: EvalConfig, folder: Path, warn: Callable[[str], None]) ->
         try:
             saved = json.loads(path.read_text())
             doc = {"config": saved["config"], "episodes": [saved["row"]]}
-            missing = "date" if "date" not in saved["row"] else _missing_field(saved["row"])
+            missing = _missing_field(saved["row"], ("date", *_EPISODE_FIELDS))
             if missing:
                 raise KeyError(missing)
         except (OSError, ValueError, KeyError, TypeError) as exc:
@@ -288,9 +291,6 @@ def _scenario_cache(cfg: EvalConfig):
 
 
 _RESUME_FREE = ("seeds", "jobs", "cluster")
-
-
-_EPISODE_FIELDS = ("hour", "seed", "policy", "oracle_cost", *METRICS)
 
 
 def _key(e: dict) -> tuple[str, int, int]:

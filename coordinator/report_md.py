@@ -131,7 +131,7 @@ def _effect(doc: dict, a: str, b: str) -> tuple[str, list[bool]]:
     return "; ".join(parts) or "no instance yet", better
 
 
-def ia_explanation(abl: dict, counts_label: str, limited_label: str) -> list[str]:
+def ia_explanation(abl: dict, limited_label: str, counts_label: str) -> list[str]:
     """Why rollout over ``ia`` gains little, read from the ablation: each of ``garces2023``'s differences from
     ``surge:base=ia`` (information, the two parts of certainty equivalence, sampling scope) as a paired effect,
     and which of them is clear (CI below zero at every ablation hour)."""
@@ -345,11 +345,11 @@ def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | Non
               "or the true rates but not with previous-hour demand, the information limits it, not the base.", ""]
     lines += paired_rows(abl, [("garces2023", "ia"), ("garces2023:forecast=model", "ia"), ("garces2023:forecast=true-rate", "ia"),
                                ("surge:base=ia", "ia"), ("surge", "greedy"), ("surge:forecast=true-rate", "greedy")])
-    counts, limited = CE_LABELS
+    limited, counts = CE_LABELS
     lines += ["", f"`{counts}` changes one part of `garces2023`'s certainty equivalence (places drawn from the distributions, "
               f"not fixed pools) and `{limited}` both (random counts as well), so these pairs split its gap to `surge:base=ia`:", ""]
     lines += paired_rows(abl, [(counts, "garces2023:forecast=model"), (limited, counts), ("surge:base=ia", limited)])
-    lines += [""] + ia_explanation(abl, counts, limited)
+    lines += [""] + ia_explanation(abl, *CE_LABELS)
     ab = _by(summarize(abl))
     lines += ["", "Table 4 beside the paper's (total cost of our approach with each base policy; the paper's printed scale differs from its Table 1, so compare the ratio):", ""]
     lines += _table(["hour", "ours: base ia", "ours: base greedy", "ours ia / greedy", "paper: base ia", "paper: base greedy", "paper ia / greedy"],

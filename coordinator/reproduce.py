@@ -84,6 +84,10 @@ SMOKE = Protocol(hours=(19,), seeds=1, other_dates=0, ablation_hours=(19,), abla
                  samples=4, oracle_iters=20, epochs=1, predictor=False, gif_minutes=4)
 
 MAIN_POLICIES = ("greedy", "ia", "garces2023", "surge")
+#: ``garces2023`` with the model, its standard certainty equivalence changed in both parts and in one: random counts
+#: and places drawn from the distributions (``limited``, ``surge``'s), and only the places (``counts``). Between them,
+#: ``garces2023:forecast=model`` and ``surge:base=ia``, the pools, the counts and the sampling scope are told apart.
+CE_LABELS = ("garces2023:forecast=model,ce=limited", "garces2023:forecast=model,ce=counts")
 ABLATIONS = (
     "surge:forecast=previous-hour",
     "surge:forecast=true-rate",
@@ -91,14 +95,8 @@ ABLATIONS = (
     "garces2023:forecast=true-rate",
     "surge:base=ia",
     "surge:scope=map",
-    "garces2023:forecast=model,ce=limited",
-    "garces2023:forecast=model,ce=counts",
+    *CE_LABELS,
 )
-#: ``garces2023`` with the model, its standard certainty equivalence changed in one part and then in both: places
-#: drawn from the distributions instead of fixed pools (``counts``), and then random counts as well (``limited``,
-#: ``surge``'s). Between them, ``garces2023:forecast=model`` and ``surge:base=ia``, the pools, the counts and the
-#: sampling scope are told apart.
-CE_LABELS = ("garces2023:forecast=model,ce=counts", "garces2023:forecast=model,ce=limited")
 
 
 def pruning_pairs(protocol: Protocol) -> list[tuple[str, str]]:

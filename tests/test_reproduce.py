@@ -128,7 +128,7 @@ def test_the_ia_explanation_names_only_differences_clear_at_every_hour() -> None
     from coordinator.report_md import ia_explanation
     from coordinator.reproduce import CE_LABELS
 
-    counts, limited = CE_LABELS
+    limited, counts = CE_LABELS
     costs = {"ia": 100, "garces2023": 99, "garces2023:forecast=model": 99, counts: 99, limited: 90, "surge:base=ia": 89}
     rows = [{"date": "2022-11-17", "hour": h, "seed": s, "policy": p, "total_cost": c + s % 3 + (h == 19) * (p == "surge:base=ia") * 20,
              "outstanding_end": 0, "served": 10, "wait_overhead_per_served": float(c), "plan_seconds_per_step": 0.0,
