@@ -9,7 +9,7 @@ downloads anything.
 
 Cache
 -----
-Embeddings are stored under ``<root>/embeddings/<model key>/`` as ``.npz``
+Embeddings are stored under ``<root>/embeddings/<model key>.rows64-pad8/`` as ``.npz``
 shards, each holding ``keys`` (SHA-1 of the UTF-8 text, ``(n, 20)`` uint8) and
 ``vecs`` (float32).  ``<root>`` is, in order: the ``cache_dir`` argument (``--cache``),
 ``$SURGE_CACHE``, ``~/.cache/surge``.  A shard is written atomically (temp file
@@ -18,13 +18,25 @@ never leave a half-written shard, and a second run embeds nothing.  Many
 shards are compacted into one when they pile up.
 
 Texts are de-duplicated before embedding (reviews repeat across the events of a
-venue) and embedded in batches of 256; a shard is written every few thousand
-texts, so an interrupted run keeps what it embedded, and progress is printed.
+venue); a shard is written every few thousand texts, so an interrupted run
+keeps what it embedded, and progress is printed.
+
+Fixed shapes
+------------
+A text's embedding differs in its last bits with the batch it is encoded in
+(the batch's size and padded length change the order of the sums).  A
+predictor trained with one seed would then depend on what the cache held
+before.  So every text is encoded in a batch of exactly :data:`BATCH_ROWS`
+rows, padded to its own token count rounded up to :data:`PAD_STEP`: with the
+shape fixed, its vector is the same whatever texts share its batch and
+wherever it sits there.  The cache of these vectors is a directory of its own
+(``<model key>.rows64-pad8``), never mixed with vectors encoded otherwise.
 """
 
 from __future__ import annotations
 
 import hashlib
+import itertools
 import os
 import re
 import sys
@@ -39,7 +51,10 @@ from city.errors import ConfigError
 
 DEFAULT_ENCODER = "all-MiniLM-L6-v2"
 _DEFAULT_ALIASES = {"", "default", "all-minilm-l6-v2", "sentence-transformers/all-minilm-l6-v2"}
-BATCH_SIZE = 256
+#: Rows of every encoder batch, filled with copies of its first text when fewer remain.
+BATCH_ROWS = 64
+#: Token counts are padded up to a multiple of this (at most the encoder's own limit).
+PAD_STEP = 8
 CHUNK = 4096
 _COMPACT_AT = 24
 _KEY_BYTES = 20
@@ -210,6 +225,18 @@ class EmbeddingCache:
         return len(self._mem)
 
 
+def _pad_to(features: dict, length: int, pad_id: int, side: str) -> dict:
+    """A tokenized batch padded to ``length`` tokens, as the tokenizer's own padding would pad it."""
+    import torch
+
+    n = int(features["input_ids"].shape[1])
+    where = (length - n, 0) if side == "left" else (0, length - n)
+    return {
+        k: torch.nn.functional.pad(v, where, value=pad_id if k == "input_ids" else 0) if isinstance(v, torch.Tensor) else v
+        for k, v in features.items()
+    }
+
+
 class Embedder:
     """Embed texts with a sentence-transformers model, through the on-disk cache.
 
@@ -222,15 +249,14 @@ class Embedder:
         encoder: str | None = None,
         cache_dir: str | os.PathLike | None = None,
         *,
-        batch_size: int = BATCH_SIZE,
         device: str = "cpu",
         use_cache: bool = True,
         verbose: bool = False,
     ) -> None:
         self.encoder = encoder or DEFAULT_ENCODER
         self.target, self.model_key = resolve_encoder(encoder)
-        self.cache = EmbeddingCache(cache_root(cache_dir) / "embeddings" / self.model_key) if use_cache else None
-        self.batch_size = int(batch_size)
+        cache_name = f"{self.model_key}.rows{BATCH_ROWS}-pad{PAD_STEP}"
+        self.cache = EmbeddingCache(cache_root(cache_dir) / "embeddings" / cache_name) if use_cache else None
         self.device = device
         self.verbose = verbose
         self._model = None
@@ -264,22 +290,21 @@ class Embedder:
         return int(get())
 
     def _embed_missing(self, todo: list[str], keys: list[bytes]) -> np.ndarray:
-        """Encode ``todo`` in chunks, caching and reporting progress after each."""
+        """Encode ``todo`` shortest first in chunks, caching and reporting progress after each."""
         t0 = time.perf_counter()
         if self.verbose:
-            print(f"embedding {len(todo)} new texts with {self.encoder} (batch {self.batch_size}) …", flush=True)
-        parts = []
-        for i in range(0, len(todo), CHUNK):
-            vecs = self.model.encode(
-                todo[i : i + CHUNK],
-                batch_size=self.batch_size,
-                convert_to_numpy=True,
-                show_progress_bar=False,
-            ).astype(np.float32)
+            print(f"embedding {len(todo)} new texts with {self.encoder} (batches of {BATCH_ROWS}) …", flush=True)
+        padded = self._padded_lengths(todo)
+        # Sorted once for all chunks, so that only the last batch of each padded length has copies in it.
+        order = sorted(range(len(todo)), key=padded.__getitem__)
+        out = np.empty((len(todo), self.dim), dtype=np.float32)
+        for i in range(0, len(order), CHUNK):
+            part = order[i : i + CHUNK]
+            vecs = self._encode_fixed_shape([todo[j] for j in part], [padded[j] for j in part])
             if self.cache is not None:
-                self.cache.put(keys[i : i + CHUNK], vecs)
-            parts.append(vecs)
-            done = i + len(vecs)
+                self.cache.put([keys[j] for j in part], vecs)
+            out[part] = vecs
+            done = i + len(part)
             if self.verbose and len(todo) > CHUNK:
                 el = time.perf_counter() - t0
                 print(f"  embedded {done}/{len(todo)} texts, {el:.0f}s ({done / max(el, 1e-9):.0f}/s)", flush=True)
@@ -288,7 +313,32 @@ class Embedder:
         self.stats["embed_seconds"] += dt_s
         if self.verbose:
             print(f"embedded {len(todo)} texts in {dt_s:.1f}s ({len(todo) / max(dt_s, 1e-9):.0f}/s)", flush=True)
-        return np.concatenate(parts)
+        return out
+
+    def _padded_lengths(self, texts: list[str]) -> list[int]:
+        """Each text's token count rounded up to :data:`PAD_STEP`, within the encoder's limit."""
+        m = self.model
+        lengths = [n for i in range(0, len(texts), CHUNK) for n in m.tokenize(texts[i : i + CHUNK])["attention_mask"].sum(dim=1).tolist()]
+        cap = m.max_seq_length or max(lengths)
+        return [min(cap, -(-n // PAD_STEP) * PAD_STEP) for n in lengths]
+
+    def _encode_fixed_shape(self, texts: list[str], padded: list[int]) -> np.ndarray:
+        """Encode ``texts`` in batches of one shape per padded length (see "Fixed shapes" above)."""
+        import torch
+
+        m = self.model
+        tokenizer = m.tokenizer
+        out = np.empty((len(texts), self.dim), dtype=np.float32)
+        for length, group in itertools.groupby(sorted(range(len(texts)), key=padded.__getitem__), key=padded.__getitem__):
+            rows = list(group)
+            for lo in range(0, len(rows), BATCH_ROWS):
+                part = rows[lo : lo + BATCH_ROWS]
+                batch = [texts[i] for i in part] + [texts[part[0]]] * (BATCH_ROWS - len(part))
+                feats = _pad_to(m.tokenize(batch), length, tokenizer.pad_token_id, tokenizer.padding_side)
+                with torch.inference_mode():
+                    vecs = m({k: v.to(m.device) if isinstance(v, torch.Tensor) else v for k, v in feats.items()})["sentence_embedding"]
+                out[part] = vecs[: len(part)].float().cpu().numpy()
+        return out
 
     def embed(self, texts: Iterable[str]) -> np.ndarray:
         """Embeddings ``(len(texts), d)`` float32, in the order given."""

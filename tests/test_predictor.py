@@ -109,6 +109,19 @@ def test_embedding_offline_and_cached(cache: Path) -> None:
 
 
 
+def test_an_embedding_does_not_depend_on_the_texts_encoded_with_it(tmp_path: Path) -> None:
+    """A predictor trained with one seed must not depend on what the embedding cache held before."""
+    from predictor.embed import BATCH_ROWS, Embedder
+
+    text = "The Knicks beat the Celtics at the Garden"
+    others = [f"Event number {i}: a {'very ' * (i % 7)}long evening of jazz on the waterfront" for i in range(BATCH_ROWS + 5)]
+    alone = Embedder(None, tmp_path / "a").embed([text])[0]
+    crowded = Embedder(None, tmp_path / "b").embed([*others[:9], text, *others[9:]])
+    assert np.array_equal(alone, crowded[9])
+    plain = Embedder(None, use_cache=False).model.encode([text, *others], convert_to_numpy=True)
+    assert np.allclose(crowded[[9, 0, 20]], plain[[0, 1, 20]], atol=1e-5)  # the encoder's own output, up to rounding
+
+
 def test_max_reviews_limits_the_texts_embedded(world: TinyWorld) -> None:
     from predictor.embed import Embedder
     from predictor.features import EventFeaturizer
@@ -173,16 +186,33 @@ def test_tiny_network_loss_falls(tmp_path: Path) -> None:
     assert np.allclose(res2.losses, res.losses)
 
 
-@pytest.fixture(scope="module")
-def trained(world: TinyWorld, cache: Path, tmp_path_factory) -> Path:
+def _train_tiny(world: TinyWorld, out: Path, cache: Path) -> Path:
     from predictor.model import train_model
     from predictor.train import TrainConfig
 
-    out = tmp_path_factory.mktemp("model")
     # A window of 2 h before and 1 h after puts the tiny world's 18-20 h events on five of the hours 15-21.
     train_model(world, out, cfg=TrainConfig(epochs=2, lr=1e-3, seed=0, device="auto"), cache_dir=str(cache), standard_hidden=(32, 32),
                 event_hidden=(64, 64), scenario={"name": "tiny"}, beta_days=3, lead_hours=2, lag_hours=1, log=None)
     return out
+
+
+@pytest.fixture(scope="module")
+def trained(world: TinyWorld, cache: Path, tmp_path_factory) -> Path:
+    return _train_tiny(world, tmp_path_factory.mktemp("model"), cache)
+
+
+def test_one_seed_trains_the_same_weights_whatever_the_cache_held(world: TinyWorld, trained: Path, tmp_path: Path) -> None:
+    from predictor.embed import Embedder
+    from predictor.features import event_text
+
+    cache = tmp_path / "cache"
+    # Half of the texts, in another order, embedded before training: their batches differ from training's own.
+    Embedder(None, cache).embed([event_text(ev) for ev in world.events][::-2])
+    again = _train_tiny(world, tmp_path / "model", cache)
+    weights = sorted(f.name for f in trained.iterdir() if f.suffix in (".pt", ".npy"))
+    assert weights and weights == sorted(f.name for f in again.iterdir() if f.suffix in (".pt", ".npy"))
+    for name in weights:
+        assert (trained / name).read_bytes() == (again / name).read_bytes(), name
 
 
 def test_no_event_network_never_sees_event_hours(world: TinyWorld, cache: Path) -> None:
