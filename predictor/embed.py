@@ -225,6 +225,11 @@ class EmbeddingCache:
         return len(self._mem)
 
 
+def _tokenizer_of(model):  # noqa: ANN202
+    """The model's own tokenization: ``preprocess`` in recent sentence-transformers, which deprecate ``tokenize``."""
+    return getattr(model, "preprocess", None) or model.tokenize
+
+
 def _pad_to(features: dict, length: int, pad_id: int, side: str) -> dict:
     """A tokenized batch padded to ``length`` tokens, as the tokenizer's own padding would pad it."""
     import torch
@@ -318,7 +323,8 @@ class Embedder:
     def _padded_lengths(self, texts: list[str]) -> list[int]:
         """Each text's token count rounded up to :data:`PAD_STEP`, within the encoder's limit."""
         m = self.model
-        lengths = [n for i in range(0, len(texts), CHUNK) for n in m.tokenize(texts[i : i + CHUNK])["attention_mask"].sum(dim=1).tolist()]
+        tokenize = _tokenizer_of(m)
+        lengths = [n for i in range(0, len(texts), CHUNK) for n in tokenize(texts[i : i + CHUNK])["attention_mask"].sum(dim=1).tolist()]
         cap = m.max_seq_length or max(lengths)
         return [min(cap, -(-n // PAD_STEP) * PAD_STEP) for n in lengths]
 
@@ -327,14 +333,14 @@ class Embedder:
         import torch
 
         m = self.model
-        tokenizer = m.tokenizer
+        tokenizer, tokenize = m.tokenizer, _tokenizer_of(m)
         out = np.empty((len(texts), self.dim), dtype=np.float32)
         for length, group in itertools.groupby(sorted(range(len(texts)), key=padded.__getitem__), key=padded.__getitem__):
             rows = list(group)
             for lo in range(0, len(rows), BATCH_ROWS):
                 part = rows[lo : lo + BATCH_ROWS]
                 batch = [texts[i] for i in part] + [texts[part[0]]] * (BATCH_ROWS - len(part))
-                feats = _pad_to(m.tokenize(batch), length, tokenizer.pad_token_id, tokenizer.padding_side)
+                feats = _pad_to(tokenize(batch), length, tokenizer.pad_token_id, tokenizer.padding_side)
                 with torch.inference_mode():
                     vecs = m({k: v.to(m.device) if isinstance(v, torch.Tensor) else v for k, v in feats.items()})["sentence_embedding"]
                 out[part] = vecs[: len(part)].float().cpu().numpy()
