@@ -27,12 +27,14 @@ seeds, 100 rollout samples and a small predictor.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime as dt
 import hashlib
 import json
 import os
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -196,10 +198,8 @@ def _evaluate(run: Run, name: str, dates: list[str], hours: tuple[int, ...], see
                      minutes=p.minutes, policies=labels, policy_options=_policy_options(run, labels + ["oracle"]), jobs=p.jobs)
     path = run.out / f"results-{name}.json"
     run.say(f"{name}: {len(dates)} date(s) x {len(hours)} hour(s) x {seeds} seeds, {len(labels)} policies + both oracles -> {path}")
-    t0 = time.perf_counter()
-    doc = evaluate(cfg, progress=lambda msg: run.say(f"{name} {msg}"), checkpoint=path, resume=True, borrow=borrow)
-    run.timings[name] = time.perf_counter() - t0
-    return doc
+    with _timed(run, name):
+        return evaluate(cfg, progress=lambda msg: run.say(f"{name} {msg}"), checkpoint=path, resume=True, borrow=borrow)
 
 
 def _predictor_parser() -> argparse.ArgumentParser:
@@ -219,7 +219,6 @@ def _train(run: Run) -> None:
         run.say(f"reusing the trained predictor in {run.model}")
         return
     run.say(f"training the predictor ({run.protocol.epochs} epochs) into {run.model}")
-    t0 = time.perf_counter()
     argv = ["predictor", "train", "--scenario", run.scenario, "--out", str(run.model), "--epochs", str(run.protocol.epochs)]
     if run.protocol.event_epochs is not None:
         argv += ["--event-epochs", str(run.protocol.event_epochs)]
@@ -231,8 +230,8 @@ def _train(run: Run) -> None:
     if run.data:
         argv += ["--data", run.data]
     args = _predictor_parser().parse_args(argv)
-    args.func(args)
-    run.timings["train"] = time.perf_counter() - t0
+    with _timed(run, "train"):
+        args.func(args)
 
 
 def model_fingerprint(model: Path) -> str:
@@ -291,11 +290,10 @@ def _predictor_eval(run: Run) -> dict | None:
     path = run.out / "predictor-eval.json"
     if not path.exists():
         run.say("predictor percent error per hour (surge predictor eval)")
-        t0 = time.perf_counter()
         args = _predictor_parser().parse_args(["predictor", "eval", "--model", str(run.model), "--json", str(path),
                                           "--plot", str(run.out / "fig-predictor-pe.png")])
-        args.func(args)
-        run.timings["predictor_eval"] = time.perf_counter() - t0
+        with _timed(run, "predictor_eval"):
+            args.func(args)
     return json.loads(path.read_text())
 
 
@@ -339,7 +337,20 @@ def _interim_docs(run: Run, steps: dict) -> tuple[dict, list[str]]:
 
 
 def _save_timings(run: Run) -> None:
-    (run.out / "timings.json").write_text(json.dumps({"this invocation": run.timings, "all invocations": run.summed()}, indent=1))
+    from coordinator.evaluate import write_json
+
+    write_json({"this invocation": run.timings, "all invocations": run.summed()}, run.out / "timings.json")
+
+
+@contextlib.contextmanager
+def _timed(run: Run, step: str) -> Iterator[None]:
+    """Count a step's seconds in ``OUT/timings.json`` even when it stops midway (Ctrl-C, SIGTERM, an error): its finished work is kept, so its time is part of the run's."""
+    t0 = time.perf_counter()
+    try:
+        yield
+    finally:
+        run.timings[step] = time.perf_counter() - t0
+        _save_timings(run)
 
 
 def reproduce(run: Run, refresh_model: bool = False, report_only: bool = False) -> Path:
@@ -374,7 +385,6 @@ def reproduce(run: Run, refresh_model: bool = False, report_only: bool = False) 
         docs = {}
         for name, (dates, hours, seeds, labels) in _steps(run, evening_event_dates(scen.world, p.other_dates)).items():
             docs[name] = _evaluate(run, name, dates, hours, seeds, labels, borrow=docs["main"] if name == "ablation" else None)
-            _save_timings(run)  # a run stopped in a later step keeps this one's time
     run.say("figures and REPORT.md" + (" (interim)" if status else ""))
     t0 = time.perf_counter()
     report = report_md.write_report(run, scen, docs, pe, status)

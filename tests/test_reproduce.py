@@ -6,13 +6,34 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+import pytest
+
 from coordinator.cli import main
 from coordinator.evaluate import RESULTS_SCHEMA
 
 
-def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys) -> None:  # noqa: ANN001
+def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: ANN001
+    from coordinator.reproduce import Run
+
     out = tmp_path / "r"
+    say = Run.say
+
+    def stop_after_the_ablation_instance(run: Run, msg: str) -> None:
+        say(run, msg)
+        if msg.startswith("ablation [1/1]"):
+            raise KeyboardInterrupt  # as Ctrl-C or SIGTERM would, with the instance checkpointed
+
+    with monkeypatch.context() as m:
+        m.setattr(Run, "say", stop_after_the_ablation_instance)
+        assert main(["reproduce", "--smoke", "--out", str(out)]) == 130
+    stopped = json.loads((out / "timings.json").read_text())["all invocations"]
+    assert stopped["main"] > 0 and stopped["ablation"] > 0 and "report" not in stopped  # the stopped step's seconds count
+    capsys.readouterr()
     assert main(["reproduce", "--smoke", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "main resuming from" in err and "[1/" not in err  # every instance was done: nothing ran again
+    summed = json.loads((out / "timings.json").read_text())["all invocations"]
+    assert summed["ablation"] >= stopped["ablation"] and summed["report"] > 0
     report = (out / "REPORT.md").read_text()
     for section in ("Verdicts", "Table 1", "Table 2", "Table 3", "Table 4", "Data provenance", "paired bootstrap",
                     "What rollout gains over its own base policy", "| 19h | `surge:base=ia` − `ia` |"):
@@ -25,10 +46,6 @@ def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys) -
     main_doc = json.loads((out / "results-main.json").read_text())
     assert main_doc["schema"] == RESULTS_SCHEMA and main_doc["reference_oracle"] == "oracle"
     capsys.readouterr()
-    assert main(["reproduce", "--smoke", "--out", str(out)]) == 0
-    err = capsys.readouterr().err
-    assert "main resuming from" in err and "[1/" not in err.split("ablation")[0]  # finished episodes are not rerun
-    assert "main" in json.loads((out / "timings.json").read_text())["all invocations"]
     (out / "results-ablation.json").unlink()  # as if the run had stopped before its ablations
     assert main(["reproduce", "--smoke", "--out", str(out), "--report-only"]) == 0
     err = capsys.readouterr().err
