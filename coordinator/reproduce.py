@@ -317,11 +317,11 @@ def instances_done(doc: dict, labels: list[str]) -> int:
     return sum(1 for got in have.values() if set(labels) <= got)
 
 
-def _interim_docs(run: Run, steps: dict) -> tuple[dict, list[str]]:
-    """The results files as they stand, and one status line per step (instances done of those the protocol asks for)."""
+def _interim_docs(run: Run, steps: dict) -> tuple[dict, list[str] | None]:
+    """The results files as they stand, and one status line per step (instances done of those the protocol asks for); no status when all are done."""
     from coordinator.evaluate import read_results
 
-    docs, status = {}, []
+    docs, status, complete = {}, [], True
     for name, (dates, hours, seeds, labels) in steps.items():
         path = run.out / f"results-{name}.json"
         planned = len(dates) * len(hours) * seeds
@@ -330,10 +330,13 @@ def _interim_docs(run: Run, steps: dict) -> tuple[dict, list[str]]:
                 raise ConfigError(f"{path}: no results yet; run `surge reproduce` without --report-only first")
             docs[name] = {"episodes": [], "config": {"dates": dates}}
             status.append(f"{name}: 0 of {planned} instances (not started)")
+            complete = False
             continue
         docs[name] = read_results(path)
-        status.append(f"{name}: {instances_done(docs[name], labels)} of {planned} instances")
-    return docs, status
+        done = instances_done(docs[name], labels)
+        status.append(f"{name}: {done} of {planned} instances")
+        complete = complete and done == planned
+    return docs, None if complete else status
 
 
 def _save_timings(run: Run) -> None:

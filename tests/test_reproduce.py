@@ -36,7 +36,8 @@ def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys, m
     assert summed["ablation"] >= stopped["ablation"] and summed["report"] > 0
     report = (out / "REPORT.md").read_text()
     for section in ("Verdicts", "Table 1", "Table 2", "Table 3", "Table 4", "Data provenance", "paired bootstrap",
-                    "What rollout gains over its own base policy", "| 19h | `surge:base=ia` − `ia` |"):
+                    "What rollout gains over its own base policy", "| 19h | `surge:base=ia` − `ia` |",
+                    "Planning seconds summed over the episodes of the results"):
         assert section in report
     assert report.count("**held**") + report.count("**not held**") == 3
     assert "no predictor in this protocol" in report  # the smoke protocol says what surge planned with
@@ -45,6 +46,8 @@ def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys, m
         assert (out / name).stat().st_size > 1000, name
     main_doc = json.loads((out / "results-main.json").read_text())
     assert main_doc["schema"] == RESULTS_SCHEMA and main_doc["reference_oracle"] == "oracle"
+    assert main(["reproduce", "--smoke", "--out", str(out), "--report-only"]) == 0
+    assert "## Status: interim" not in (out / "REPORT.md").read_text()  # every step is done: the report is final
     capsys.readouterr()
     (out / "results-ablation.json").unlink()  # as if the run had stopped before its ablations
     assert main(["reproduce", "--smoke", "--out", str(out), "--report-only"]) == 0
