@@ -325,26 +325,27 @@ class Embedder:
         m = self.model
         tokenize = _tokenizer_of(m)
         lengths = [n for i in range(0, len(texts), CHUNK) for n in tokenize(texts[i : i + CHUNK])["attention_mask"].sum(dim=1).tolist()]
-        cap = m.max_seq_length or max(lengths)
-        return [min(cap, -(-n // PAD_STEP) * PAD_STEP) for n in lengths]
+        # Capped by the encoder's own limit only: a cap from these texts would make a text's shape depend on the others.
+        cap = m.max_seq_length
+        return [-(-n // PAD_STEP) * PAD_STEP if cap is None else min(cap, -(-n // PAD_STEP) * PAD_STEP) for n in lengths]
 
     def _encode_fixed_shape(self, texts: list[str], padded: list[int]) -> np.ndarray:
-        """Encode ``texts`` in batches of one shape per padded length (see "Fixed shapes" above)."""
+        """Encode ``texts``, in order of ``padded`` length, in batches of one shape per length (see "Fixed shapes" above)."""
         import torch
 
         m = self.model
         tokenizer, tokenize = m.tokenizer, _tokenizer_of(m)
-        out = np.empty((len(texts), self.dim), dtype=np.float32)
-        for length, group in itertools.groupby(sorted(range(len(texts)), key=padded.__getitem__), key=padded.__getitem__):
-            rows = list(group)
+        pieces = []
+        for length, group in itertools.groupby(range(len(texts)), key=padded.__getitem__):
+            rows = [texts[i] for i in group]
             for lo in range(0, len(rows), BATCH_ROWS):
-                part = rows[lo : lo + BATCH_ROWS]
-                batch = [texts[i] for i in part] + [texts[part[0]]] * (BATCH_ROWS - len(part))
-                feats = _pad_to(tokenize(batch), length, tokenizer.pad_token_id, tokenizer.padding_side)
+                batch = rows[lo : lo + BATCH_ROWS]
+                n = len(batch)
+                feats = _pad_to(tokenize(batch + batch[:1] * (BATCH_ROWS - n)), length, tokenizer.pad_token_id, tokenizer.padding_side)
                 with torch.inference_mode():
                     vecs = m({k: v.to(m.device) if isinstance(v, torch.Tensor) else v for k, v in feats.items()})["sentence_embedding"]
-                out[part] = vecs[: len(part)].float().cpu().numpy()
-        return out
+                pieces.append(vecs[:n].float().cpu().numpy())
+        return np.concatenate(pieces)
 
     def embed(self, texts: Iterable[str]) -> np.ndarray:
         """Embeddings ``(len(texts), d)`` float32, in the order given."""
