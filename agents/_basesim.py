@@ -142,6 +142,10 @@ def _simulate_greedy(
     rec_tgt: np.ndarray,
     ev_step: np.ndarray,
     ev_code: np.ndarray,
+    memo_key: np.ndarray,
+    memo_d: np.ndarray,
+    memo_c: np.ndarray,
+    tick: np.ndarray,
 ) -> tuple[int, int, int]:
     """The greedy base policy for steps ``1 … horizon``, event by event; returns ``(Σ g_k + g_H, T, events)``.
 
@@ -163,6 +167,13 @@ def _simulate_greedy(
     step, ``(node, target)`` in ``rec_pos``/``rec_tgt``, until ``T``, the first
     step at which it stands at its target to pick up (``_BIG`` if never); when
     ``ev_step`` is not empty every pickup is recorded there as (step, code).
+
+    Taxis that look for their nearest request from the same node in the same
+    step get the same answer (nothing is picked up while the step's plans are
+    made), and a herd sharing a target soon moves in lockstep: when
+    ``memo_key`` is not empty (one entry per node), a node's search is kept
+    under the step's ``tick`` (a counter that only grows, ``tick[0]``) and
+    reused.
     """
     r0 = e_pick.shape[0]
     mt = tpos.shape[0]
@@ -172,12 +183,14 @@ def _simulate_greedy(
     t_first = _BIG
     n_ev = 0
     record_ev = ev_step.shape[0] > 0
+    share = memo_key.shape[0] > 0
     for i in range(mt):
         need[i] = tfree[i] > 1
         tgt[i] = plan_c[i] if tfree[i] <= 1 else -1
         kanc[i] = 1
         d0[i] = plan_d[i]
     for k in range(1, horizon + 1):
+        tick[0] += 1
         if ag >= 0 and t_first == _BIG:
             c = tgt[ag]
             v = tpos[ag]
@@ -204,7 +217,15 @@ def _simulate_greedy(
                 if c >= 0:
                     p = e_pick[c] if c < r0 else a_pick[c - r0]
                     v = _walk(v, p, min(k - kanc[i], d0[i]), hop_t)
-                d, c2, _ = _nearest(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                if share and memo_key[v] == tick[0]:
+                    d = memo_d[v]
+                    c2 = memo_c[v]
+                else:
+                    d, c2, _ = _nearest(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                    if share:
+                        memo_key[v] = tick[0]
+                        memo_d[v] = d
+                        memo_c[v] = c2
                 tpos[i] = v
                 kanc[i] = k
                 tgt[i] = c2

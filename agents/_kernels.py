@@ -181,6 +181,7 @@ def _run_samples(
     settled: np.ndarray,
     active: np.ndarray,
     shadow: np.ndarray,
+    share: bool,
     ag: int,
     plan_c: np.ndarray,
     plan_d: np.ndarray,
@@ -242,6 +243,11 @@ def _run_samples(
     rec_tgt = np.empty((n_c, horizon + 2), dtype=np.int64)
     rec_t = np.full(n_c, _BIG, dtype=np.int64)
     full = np.zeros(n_c, dtype=np.bool_)
+    n_memo = dist.shape[0] if (share and base == GREEDY) else 0
+    memo_key = np.full(n_memo, -1, dtype=np.int64)
+    memo_d = np.empty(n_memo, dtype=np.int64)
+    memo_c = np.empty(n_memo, dtype=np.int64)
+    tick = np.zeros(1, dtype=np.int64)
     for s in range(lo, hi):
         n_arr = sample_arrivals(
             key, s, horizon, minute0, mode, sectors, eta, pk_ptr, pk_node, pk_cum,
@@ -275,11 +281,13 @@ def _run_samples(
             tfree[:] = tfree1[c]
             if base == GREEDY:
                 rec = use_shadow and shadow[c]
+                rec_ag = ag if rec else -1
+                steps = ev_step if (rec and c == 0) else no_ev
+                codes = ev_code if (rec and c == 0) else no_code
                 cost, t_first, nev = _simulate_greedy(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t, act, target, seen, best_d, need, free,
-                    plan_c[c], plan_d[c], ag if rec else -1, rec_pos[c], rec_tgt[c],
-                    ev_step if (rec and c == 0) else no_ev, ev_code if (rec and c == 0) else no_code,
+                    plan_c[c], plan_d[c], rec_ag, rec_pos[c], rec_tgt[c], steps, codes, memo_key, memo_d, memo_c, tick,
                 )
                 out[c, col] = g0 + cost
                 rec_t[c] = t_first
@@ -302,6 +310,7 @@ def rollout_costs(
     s_hi: int,
     active: np.ndarray,
     shadow: np.ndarray,
+    share: bool,
     ag: int,
     key: np.uint64,
     minute0: int,
@@ -342,7 +351,9 @@ def rollout_costs(
     (the others get 0).  With the greedy base and ``shadow[0]``, candidates
     flagged in ``shadow`` (every candidate but pickup) are first replayed
     for the agent alone (taxi ``ag``, see :func:`_shadow_greedy`); the second
-    result flags the (candidate, sample) costs settled that way.
+    result flags the (candidate, sample) costs settled that way.  With the
+    greedy base and ``share``, taxis searching from the same node in the same
+    step share one search (:func:`_simulate_greedy`).
     """
     n_samples = s_hi - s_lo
     out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)
@@ -352,7 +363,7 @@ def rollout_costs(
     for chunk in prange(n_chunks):
         _run_samples(
             s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
-            active, shadow, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
+            active, shadow, share, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
             sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals, dist, dist_t, hop_t,
         )
     return out, settled
@@ -366,6 +377,7 @@ def rollout_costs_serial(
     s_hi: int,
     active: np.ndarray,
     shadow: np.ndarray,
+    share: bool,
     ag: int,
     key: np.uint64,
     minute0: int,
@@ -402,7 +414,7 @@ def rollout_costs_serial(
     for chunk in range(n_chunks):
         _run_samples(
             s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
-            active, shadow, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
+            active, shadow, share, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
             sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals, dist, dist_t, hop_t,
         )
     return out, settled

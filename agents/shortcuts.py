@@ -34,6 +34,10 @@ class Shortcuts:
         tracked requests alone was faster to search on all of Manhattan.
     rows : bool
         Contiguous transposed distance rows for the arrival checks.
+    share : bool
+        Greedy base: taxis that look for their nearest request from the same
+        node in the same step share one search (a herd with one target soon
+        moves in lockstep).
     """
 
     skip: bool = True
@@ -41,10 +45,11 @@ class Shortcuts:
     reach: bool = True
     minute_lists: bool = False
     rows: bool = True
+    share: bool = True
 
     @classmethod
     def none(cls) -> Shortcuts:
-        return cls(skip=False, shadow=False, reach=False, minute_lists=False, rows=False)
+        return cls(skip=False, shadow=False, reach=False, minute_lists=False, rows=False, share=False)
 
 
 #: Nearest requests listed per node in the per-minute lists (a deeper list: pruned requests are in it).

@@ -31,7 +31,7 @@ MANHATTAN_ZONES = (4, 12, 13, 24, 41, 42, 43, 45, 48, 50, 68, 74, 75, 79, 87, 88
                    202, 209, 211, 224, 229, 230, 231, 232, 233, 234, 236, 237, 238, 239, 243, 244, 246, 249, 261, 262, 263)
 
 
-SHORTCUT_NAMES = ("skip", "shadow", "reach", "minute_lists", "rows")
+SHORTCUT_NAMES = ("skip", "shadow", "reach", "minute_lists", "rows", "share")
 
 
 def shortcut_variant(name: str):  # noqa: ANN201

@@ -136,6 +136,29 @@ def test_rollout_costs_equal_exhaustive_simulation(base: str, ce: str, scope: st
             u[agent] = best
 
 
+def test_taxis_on_one_node_share_their_search_and_keep_the_simulated_costs() -> None:
+    """A herd: ten free taxis on three nodes look for their nearest request from the same nodes in
+    the same steps, so the greedy base's searches are shared (``Shortcuts.share``); every cost is
+    still the simulator's.  (A memo that reused another step's search fails here.)"""
+    city = grid_city(5, 4)
+    fc = uniform_forecast(city, [0.6, 1.4, 0.2, 2.0])
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        spots = rng.choice(city.n_nodes, 3, replace=False)
+        pos = spots[rng.integers(0, 3, 10)].astype(np.int32)
+        pick = rng.integers(0, city.n_nodes, 5).astype(np.int32)
+        drop = rng.integers(0, city.n_nodes, 5).astype(np.int32)
+        obs = Observation(5, pos, np.zeros(10, np.int32), np.full(10, -1, np.int32), np.arange(5), pick, drop,
+                          np.sort(rng.integers(0, 6, 5)).astype(np.int32))
+        ctx = context(city, obs, fc, horizon=8, samples=12, seed=seed)
+        assert ctx.shortcuts.share
+        u = ctx.base_controls.copy()
+        for agent in range(10):
+            _, costs = agent_costs(ctx, u[:agent], agent)
+            np.testing.assert_array_equal(costs, reference_costs(ctx, u[:agent], agent))
+            u[agent] = plan_agent(ctx, u[:agent], agent)
+
+
 def test_rollout_heads_for_the_request_enumeration_proves_best() -> None:
     city = line_city(7)
     obs = Observation(0, np.array([0], np.int32), np.array([0], np.int32), np.array([-1], np.int32),
