@@ -48,7 +48,8 @@ costs with the simulator); pruning is validated there to reproduce the
 unpruned decisions on seeded states.  The exact savings of
 :class:`Shortcuts` (skip a decision no candidate can change, replay the
 non-pickup candidates for the agent alone, leave out taxis that cannot reach
-a pickup, transposed distance rows) are switchable, and
+a pickup, transposed distance rows, one nearest-request search per node and
+step) are switchable, and
 ``tests/test_planning_speed.py`` shows each leaves every decision as it was.
 Two approximations are options, off by default: ``adaptive`` (successive
 elimination of candidates on paired differences) and ``cap`` (the agent's
