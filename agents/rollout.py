@@ -157,7 +157,6 @@ class _Inputs:
     args: tuple
     ag: int
     shadow: np.ndarray
-    share: bool
 
 
 def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _Inputs:
@@ -225,7 +224,7 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
         *(transposed(city) if sc.rows else (city.dist.T, city.next_hop.T)),
     )
     shadow = (cands != PICKUP) & (sc.shadow and greedy)
-    return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow), share=sc.share)
+    return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow))
 
 
 def _pickup_spots(tab: DemandTables, sectors: np.ndarray, mode: int, minute0: int, horizon: int,
@@ -245,8 +244,8 @@ def _pickup_spots(tab: DemandTables, sectors: np.ndarray, mode: int, minute0: in
 def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray, serial: bool = False) -> tuple[np.ndarray, np.ndarray]:
     cfg = ctx.config
     if serial:
-        return K.rollout_costs_serial(BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, inp.share, inp.ag, *inp.args, 1)
-    return K.rollout_costs(BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, inp.share, inp.ag, *inp.args,
+        return K.rollout_costs_serial(BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args, 1)
+    return K.rollout_costs(BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args,
                            8 * numba.get_num_threads())
 
 

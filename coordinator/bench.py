@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime as dt
 import json
 import os
@@ -12,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.shortcuts import Shortcuts
 from coordinator.args import hour, iso_date, positive, rollout_options, scenario_args
 
 
@@ -31,12 +33,11 @@ MANHATTAN_ZONES = (4, 12, 13, 24, 41, 42, 43, 45, 48, 50, 68, 74, 75, 79, 87, 88
                    202, 209, 211, 224, 229, 230, 231, 232, 233, 234, 236, 237, 238, 239, 243, 244, 246, 249, 261, 262, 263)
 
 
-SHORTCUT_NAMES = ("skip", "shadow", "reach", "minute_lists", "rows", "share")
+SHORTCUT_NAMES = tuple(f.name for f in dataclasses.fields(Shortcuts))
 
 
 def shortcut_variant(name: str):  # noqa: ANN201
-    """``all``, ``none`` or ``no-NAME`` as :class:`agents.rollout.Shortcuts`; a bad name is a :class:`ConfigError`."""
-    from agents.rollout import Shortcuts
+    """``all``, ``none`` or ``no-NAME`` as :class:`agents.shortcuts.Shortcuts`; a bad name is a :class:`ConfigError`."""
     from city.errors import ConfigError
 
     if name == "all":

@@ -378,8 +378,15 @@ def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | Non
     lines += ["", "## Wall time (this machine; a resumed step costs little the second time)", "",
               "| step | this invocation | every invocation on this directory |", "|---|---|---|"]
     lines += [f"| {k} | {run.timings.get(k, 0.0):.0f} s | {v:.0f} s |" for k, v in run.summed().items()]
-    planned = {name: sum(e["plan_seconds_per_step"] for e in doc["episodes"]) * run.protocol.minutes for name, doc in docs.items()}
-    lines += ["", "Planning seconds summed over the episodes of the results, whichever invocation and machine ran them "
+    planned, counted = {}, set()
+    for name, doc in docs.items():
+        planned[name] = 0.0
+        for e in doc["episodes"]:
+            key = (e["date"], e["hour"], e["seed"], e["policy"])
+            if key not in counted:  # rows lent by an earlier step (the ablation borrows main's) ran once
+                counted.add(key)
+                planned[name] += e["plan_seconds_per_step"] * run.protocol.minutes
+    lines += ["", "Planning seconds summed over the episodes of the results, each counted once, whichever invocation and machine ran them "
               "(the table counts only the invocations that recorded their time): "
               + ", ".join(f"{name} {v:,.0f} s" for name, v in planned.items()) + f"; {sum(planned.values()) / 3600:.1f} hours in all."]
     path = out / "REPORT.md"

@@ -326,8 +326,9 @@ class Embedder:
         tokenize = _tokenizer_of(m)
         lengths = [n for i in range(0, len(texts), CHUNK) for n in tokenize(texts[i : i + CHUNK])["attention_mask"].sum(dim=1).tolist()]
         # Capped by the encoder's own limit only: a cap from these texts would make a text's shape depend on the others.
+        padded = [-(-n // PAD_STEP) * PAD_STEP for n in lengths]
         cap = m.max_seq_length
-        return [-(-n // PAD_STEP) * PAD_STEP if cap is None else min(cap, -(-n // PAD_STEP) * PAD_STEP) for n in lengths]
+        return padded if cap is None else [min(cap, p) for p in padded]
 
     def _encode_fixed_shape(self, texts: list[str], padded: list[int]) -> np.ndarray:
         """Encode ``texts``, in order of ``padded`` length, in batches of one shape per length (see "Fixed shapes" above)."""
