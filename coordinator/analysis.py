@@ -14,13 +14,9 @@ from typing import Iterable
 import numpy as np
 
 from city.errors import ConfigError
-from coordinator.evaluate import METRICS, ORACLES
+from coordinator.evaluate import METRICS, ORACLES, instance_key
 
 BOOTSTRAP_RESAMPLES = 10_000
-
-
-def _key(e: dict) -> tuple[str, int, int]:
-    return (e["date"], e["hour"], e["seed"])
 
 
 def select(doc: dict, dates: Iterable[str] | None = None, hours: Iterable[int] | None = None) -> dict:
@@ -89,9 +85,9 @@ def bootstrap_ci(diffs: np.ndarray, level: float = 0.95, resamples: int = BOOTST
 
 def paired(doc: dict, policy: str, other: str, hour: int) -> list[tuple[dict, dict]]:
     """``(policy, other)`` episode pairs of one hour, instance by instance."""
-    by = {(*_key(e), e["policy"]): e for e in doc["episodes"]}
-    return [(e, by[(*_key(e), other)]) for e in doc["episodes"]
-            if e["hour"] == hour and e["policy"] == policy and (*_key(e), other) in by]
+    by = {(*instance_key(e), e["policy"]): e for e in doc["episodes"]}
+    return [(e, by[(*instance_key(e), other)]) for e in doc["episodes"]
+            if e["hour"] == hour and e["policy"] == policy and (*instance_key(e), other) in by]
 
 
 def compare_pair(doc: dict, policy: str, other: str, hour: int) -> dict | None:
@@ -138,7 +134,7 @@ def compare(doc: dict, policy: str, against: Iterable[str] | None = None) -> lis
 
 def oracle_exceptions(doc: dict) -> tuple[int, list[dict]]:
     """Instances, and the episodes of the other policies that cost less than the reference oracle there."""
-    instances = {_key(e) for e in doc["episodes"]}
+    instances = {instance_key(e) for e in doc["episodes"]}
     below = [e for e in doc["episodes"] if e["policy"] not in ORACLES and e["total_cost"] < e["oracle_cost"]]
     return len(instances), below
 

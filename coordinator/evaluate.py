@@ -274,7 +274,7 @@ def _by_instance(episodes: Iterable[dict]) -> dict[tuple[str, int, int], dict[st
     """Rows grouped by instance, then by policy label."""
     out: dict[tuple[str, int, int], dict[str, dict]] = {}
     for e in episodes:
-        out.setdefault(_key(e), {})[e["policy"]] = e
+        out.setdefault(instance_key(e), {})[e["policy"]] = e
     return out
 
 
@@ -293,7 +293,8 @@ def _scenario_cache(cfg: EvalConfig):
 _RESUME_FREE = ("seeds", "jobs", "cluster")
 
 
-def _key(e: dict) -> tuple[str, int, int]:
+def instance_key(e: dict) -> tuple[str, int, int]:
+    """The instance an episode row belongs to: its date, hour and seed."""
     return (e["date"], e["hour"], e["seed"])
 
 
@@ -387,7 +388,7 @@ def evaluate(
     pending: dict[tuple[str, int, int], dict[str, dict]] = {}
     if resume and checkpoint is not None and Path(checkpoint).exists():
         wanted = set(grid)
-        held = _by_instance(e for e in load_finished(cfg, checkpoint) if _key(e) in wanted)
+        held = _by_instance(e for e in load_finished(cfg, checkpoint) if instance_key(e) in wanted)
         for key, rows in held.items():
             if set(cfg.policies) <= rows.keys():
                 episodes.extend(rows.values())
@@ -396,7 +397,7 @@ def evaluate(
         if held:
             progress(f"resuming from {checkpoint}: {len(held) - len(pending)} instances done"
                      + (f", {len(pending)} with some of their rows" if pending else ""))
-    done = {_key(e) for e in episodes}
+    done = {instance_key(e) for e in episodes}
     # Seed by seed across the dates and hours, so that a run cut short has every hour at the same depth.
     tasks = [(d, h, s) for s in range(cfg.seeds) for d in cfg.dates for h in cfg.hours if (d, h, s) not in done]
     lent = borrowable(cfg, borrow) if borrow else {}
@@ -419,11 +420,11 @@ def evaluate(
             "reference_oracle": "oracle",
             "city": scen.city.summary(),
             "config": asdict(cfg),
-            "episodes": sorted(episodes + [e for rows in pending.values() for e in rows.values()], key=lambda e: order[_key(e)]),
+            "episodes": sorted(episodes + [e for rows in pending.values() for e in rows.values()], key=lambda e: order[instance_key(e)]),
         }
 
     def report(k: int, rows: list[dict]) -> None:
-        pending.pop(_key(rows[0]), None)
+        pending.pop(instance_key(rows[0]), None)
         episodes.extend(rows)
         head = rows[0]
         if checkpoint is not None:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from coordinator.analysis import compare_pair, complete_seeds, oracle_exceptions, paired, plot, summarize
+from coordinator.evaluate import instance_key
 
 HOURS = (15, 17, 19, 21)
 #: Table 1 of the paper, average total cost (mean, std) per hour.
@@ -64,7 +65,7 @@ def _oracle_rows(doc: dict) -> list[dict]:
     """Each oracle's episodes as rows, from the oracle costs every episode carries."""
     seen, rows = set(), []
     for e in doc["episodes"]:
-        k = (e["date"], e["hour"], e["seed"])
+        k = instance_key(e)
         if k in seen:
             continue
         seen.add(k)
@@ -360,7 +361,7 @@ def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | Non
     lines += ["", "## The oracle's bound", ""]
     for name, doc in [("main", main)] + [(k, complete_seeds(v)) for k, v in docs.items() if k != "main"]:
         n, below = oracle_exceptions(doc)
-        bad = {(e["date"], e["hour"], e["seed"]) for e in below}
+        bad = {instance_key(e) for e in below}
         lines.append(f"- {name}: `oracle` had the lowest total cost of all policies in {n - len(bad)} of {n} instances"
                      + (f" ({100 * (n - len(bad)) / n:.1f} %)" if n else "") + ".")
         for e in below:
@@ -382,7 +383,7 @@ def write_report(run, scen, docs: dict, pe: dict | None, status: list[str] | Non
     for name, doc in docs.items():
         planned[name] = 0.0
         for e in doc["episodes"]:
-            key = (e["date"], e["hour"], e["seed"], e["policy"])
+            key = (*instance_key(e), e["policy"])
             if key not in counted:  # rows lent by an earlier step (the ablation borrows main's) ran once
                 counted.add(key)
                 planned[name] += e["plan_seconds_per_step"] * run.protocol.minutes

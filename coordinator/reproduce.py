@@ -311,9 +311,11 @@ def _steps(run: Run, dates: list[str]) -> dict[str, tuple[list[str], tuple[int, 
 
 def instances_done(doc: dict, labels: list[str]) -> int:
     """How many instances of a results document hold a row of every one of ``labels``."""
+    from coordinator.evaluate import instance_key
+
     have: dict[tuple, set] = {}
     for e in doc["episodes"]:
-        have.setdefault((e["date"], e["hour"], e["seed"]), set()).add(e["policy"])
+        have.setdefault(instance_key(e), set()).add(e["policy"])
     return sum(1 for got in have.values() if set(labels) <= got)
 
 
