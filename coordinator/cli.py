@@ -249,12 +249,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = args.json or str(out / "demo.json")
-    ns = argparse.Namespace(
-        run="demo", scenario="synthetic", data=None, date="2022-11-17", hour=args.hour, minutes=args.minutes, taxis=args.taxis,
-        seed=0, world_seed=0, policy="surge", forecast="previous-hour", model=None, horizon=None, samples=None,
-        deadline=30.0, join_timeout=120.0, minute_seconds=0.0, predictor=False, json=path, check=True,
-        certs=None, insecure=args.insecure,
-    )
+    # Through the fleet command's own parser, so that every flag it grows has its default here too.
+    fleet_argv = ["fleet", "--run", "demo", "--hour", str(args.hour), "--minutes", str(args.minutes), "--taxis", str(args.taxis),
+                  "--policy", "surge", "--forecast", "previous-hour", "--json", path, "--check", *(["--insecure"] if args.insecure else [])]
+    ns = build_parser().parse_args(fleet_argv)
     rc = cmd_fleet(ns)
     print()
     for line in surge_vs_greedy(fleet_config(ns), json.loads(Path(path).read_text()), out):

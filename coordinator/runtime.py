@@ -201,7 +201,9 @@ class Coordinator:
                 payload.drop()  # type: ignore[attr-defined]  # ends the asker's get() now, not when the query is collected
         elif tag == "forecast":
             try:
-                payload.reply(key, self._sector_answer(key), encoding=ENCODING)  # type: ignore[attr-defined]
+                answer = self._sector_answer(key)
+                if answer is not None:
+                    payload.reply(key, answer, encoding=ENCODING)  # type: ignore[attr-defined]
             finally:
                 payload.drop()  # type: ignore[attr-defined]
         elif tag == "control":
@@ -217,11 +219,17 @@ class Coordinator:
             self.tally.stale += 1
         return None
 
-    def _sector_answer(self, key: str) -> bytes:
-        """The current hour's forecast of the sector a query's key names."""
+    def _sector_answer(self, key: str) -> bytes | None:
+        """The current hour's forecast of the sector a query's key names; ``None`` before the run's first forecast.
+
+        A taxi that joins asks for the sectors it follows at once; before the first minute there is
+        nothing to send yet, and the pieces come on its subscriptions when the run begins.
+        """
         sector = Keys.agent_of(key)
-        if self.hour_forecast is None or sector is None or not 0 <= sector < self.city.n_sectors:
-            raise WireError(f"{key}: a query for the forecast of one sector 0..{self.city.n_sectors - 1}, once the run has begun")
+        if sector is None or not 0 <= sector < self.city.n_sectors:
+            raise WireError(f"{key}: a query for the forecast of one sector 0..{self.city.n_sectors - 1}")
+        if self.hour_forecast is None:
+            return None
         hour, forecast = self.hour_forecast
         return sector_message(forecast, self.city, hour, sector).encode()
 

@@ -128,6 +128,19 @@ def test_fleet_command_checks_against_in_process(tmp_path: Path) -> None:
     assert doc["same_decisions"] and doc["wall_seconds"] < time.monotonic() - t0
 
 
+def test_demo_runs_the_fleet_and_ends_with_its_table_and_pictures(tmp_path: Path) -> None:
+    """`make demo`'s command, small: the README's main job must run end to end, quietly on a healthy bus."""
+    proc = subprocess.run([*CLI, "demo", "--taxis", "2", "--minutes", "3", "--out", str(tmp_path)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "decisions identical" in proc.stdout and "minute 3/3" in proc.stderr
+    assert "ignored:" not in proc.stderr, "a healthy demo's own messages were refused"
+    rows = [line.split()[0:2] for line in proc.stdout.splitlines() if line.startswith(("surge (", "greedy ("))]
+    assert rows == [["surge", "(distributed)"], ["surge", "(in-process)"], ["greedy", "(in-process)"]]
+    for name in ("demo.json", "demo-surge-map.png", "demo-surge-vs-greedy.gif"):
+        assert (tmp_path / name).stat().st_size > 0, name
+
+
 ASK = """
 import sys
 from bus.session import SessionArgs, open_session
