@@ -231,7 +231,7 @@ def add_demo(sub: argparse._SubParsersAction) -> None:
     demo_share = FLEET_SHARE * DEMO_TAXIS / 100
     p = sub.add_parser("demo", help="the local multi-process fleet at the 5 pm event surge on the embedded synthetic city, "
                                      "checked decision for decision against the in-process run, then surge against greedy")
-    p.add_argument("--taxis", type=positive, default=DEMO_TAXIS, help="taxis, one agent process each (about 215 MB each)")
+    p.add_argument("--taxis", type=positive, default=DEMO_TAXIS, help="taxis, one agent process each (about 200 MB each)")
     p.add_argument("--minutes", type=positive, default=30)
     p.add_argument("--hour", type=hour, default=17, help="episode hour (default: the 5 pm event surge)")
     p.add_argument("--out", default="demo-out", help="directory for the run's JSON, the map and the GIF")
