@@ -372,6 +372,42 @@ def test_device_auto_falls_back_to_cpu(monkeypatch: pytest.MonkeyPatch) -> None:
         resolve_device("tpu")
 
 
+def _has_cuda() -> bool:
+    import torch
+
+    return torch.cuda.is_available()
+
+
+@pytest.mark.skipif(not _has_cuda(), reason="no CUDA device")
+def test_cuda_training_repeats_itself_and_tracks_the_cpu(tmp_path: Path) -> None:
+    """The GPU path: one seed gives one network on a GPU, and the same run as the CPU up to rounding."""
+    import torch
+
+    from predictor.embed import Embedder
+    from predictor.train import TrainConfig, fit, predict
+
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(3000, 24)).astype(np.float32)
+    y = (np.tanh(X[:, :6]).sum(1) + 0.3 * rng.normal(size=3000)).astype(np.float32)
+    Xv = rng.normal(size=(500, 24)).astype(np.float32)
+    yv = np.tanh(Xv[:, :6]).sum(1).astype(np.float32)
+    runs = {}
+    for label, device in (("cuda", "cuda"), ("cuda again", "cuda"), ("cpu", "cpu"), ("auto", "auto")):
+        cfg = TrainConfig(epochs=4, lr=1e-3, seed=3, patience=0, device=device)
+        runs[label] = fit("gpu", X, y, (64, 64), cfg, X_val=Xv, y_val=yv, log=None)
+    assert runs["cuda"].device.startswith("cuda") and runs["auto"].device.startswith("cuda") and runs["cpu"].device == "cpu"
+    for other in ("cuda again", "auto"):
+        assert runs[other].losses == runs["cuda"].losses
+        assert all(torch.equal(a, b) for a, b in zip(runs[other].net.state_dict().values(), runs["cuda"].net.state_dict().values()))
+    np.testing.assert_allclose(runs["cuda"].losses, runs["cpu"].losses, rtol=1e-4)
+    np.testing.assert_allclose(predict(runs["cuda"].net, Xv), predict(runs["cpu"].net, Xv), atol=1e-3)
+    texts = ["Knicks vs. Celtics - Sold-Out Crowd Expected", "Terrible sound, long lines", "a quiet evening"]
+    on_gpu = Embedder(cache_dir=tmp_path / "gpu", device="cuda").embed(texts)
+    on_cpu = Embedder(cache_dir=tmp_path / "cpu", device="cpu").embed(texts)
+    cosine = (on_gpu * on_cpu).sum(1) / np.linalg.norm(on_gpu, axis=1) / np.linalg.norm(on_cpu, axis=1)
+    assert cosine.min() > 0.9999
+
+
 def test_recorded_inputs_must_match(tmp_path: Path) -> None:
     from city.errors import ConfigError
     from predictor.inputs import record_inputs, recorded_paths
