@@ -1,12 +1,13 @@
 #!/bin/bash
 # One sweep's wall time: --jobs 2 against a local Dask cluster of 2 single-threaded workers (fresh workers each round).
+# oracle-auction is the oracle this sweep was first timed with (session 4), when it was called oracle.
 # Run from the repository root with surge installed with the cluster extra; writes into $OUT.
 set -u
 OUT=${OUT:-bench-results/cluster}
 BIN=${BIN:-.venv/bin}
 PORT=${PORT:-8799}
 mkdir -p "$OUT"
-SWEEP="--hours 17 19 --seeds 4 --taxis 50 --minutes 30 --policies greedy ia oracle"
+SWEEP="--hours 17 19 --seeds 4 --taxis 50 --minutes 30 --policies greedy ia oracle-auction"
 for round in 1 2; do
   rm -f "$OUT/jobs-$round.json" "$OUT/dask-$round.json"
   s=$(date +%s.%N); "$BIN/surge" evaluate $SWEEP --jobs 2 --json "$OUT/jobs-$round.json" > "$OUT/jobs-$round.out" 2>&1; e=$(date +%s.%N)
