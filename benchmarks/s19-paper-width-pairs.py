@@ -5,8 +5,7 @@ from coordinator.analysis import compare_pair
 P, R = "surge:model=runs/pred-paper-s18", "surge (reduced model)"
 key = lambda e: (e["date"], e["hour"], e["seed"])
 out = []
-for new_path, ref_path in (("benchmarks/s18-paper-width-routing.json", "results-main.json"),
-                           ("benchmarks/s19-paper-width-routing-15-21.json", "results-main.json"),
+for new_path, ref_path in (("benchmarks/s19-paper-width-routing-main.json", "results-main.json"),
                            ("benchmarks/s19-paper-width-routing-dates.json", "results-dates.json")):
     new = json.load(open(new_path))
     ref = {(key(e), e["policy"]): e for e in json.load(open("benchmarks/reproduce-full-synthetic/" + ref_path))["episodes"]}
