@@ -22,4 +22,23 @@ for new_path, ref_path in (("benchmarks/s19-paper-width-routing-main.json", "res
             out.append(r)
             print(f"  {h} h {r['dates']} date(s) {a.split('=')[-1]:22s} − {b.split('=')[-1]:22s} n={r['n']} wins {r['wins']} "
                   f"Δ {r['cost_difference']:+.1f} [{r['ci95'][0]:+.1f}, {r['ci95'][1]:+.1f}] ({100 * r['relative_difference']:+.1f} %)")
+
+# The same-information comparison: garces2023 with the paper-width model too, on the ablation's instances.
+G, GR = "garces2023:forecast=model,model=runs/pred-paper-s18", "garces2023:forecast=model (reduced model)"
+gar = json.load(open("benchmarks/s19-paper-width-garces-model.json"))
+abl = {(key(e), e["policy"]): e for e in json.load(open("benchmarks/reproduce-full-synthetic/results-ablation.json"))["episodes"]}
+main = {(key(e), e["policy"]): e for e in json.load(open("benchmarks/s19-paper-width-routing-main.json"))["episodes"]}
+inst = [key(e) for e in gar["episodes"] if e["policy"] == "greedy"]
+print(f"{len(inst)} ablation instances; greedy equal to the ablation's in "
+      f"{sum(abl[(k, 'greedy')]['total_cost'] == main[(k, 'greedy')]['total_cost'] for k in inst)}")
+eps = [e for e in gar["episodes"] if e["policy"] == G] + [main[(k, P)] for k in inst]
+eps += [{**abl[(k, "garces2023:forecast=model")], "policy": GR} for k in inst] + [{**abl[(k, "surge")], "policy": R} for k in inst]
+doc = {**gar, "episodes": eps}
+for h in sorted({k[1] for k in inst}):
+    for a, b in ((G, GR), (P, G), (R, GR)):
+        r = compare_pair(doc, a, b, h)
+        r["file"] = "benchmarks/s19-paper-width-garces-model.json"
+        out.append(r)
+        print(f"  {h} h {a:45s} − {b:45s} n={r['n']} wins {r['wins']} "
+              f"Δ {r['cost_difference']:+.1f} [{r['ci95'][0]:+.1f}, {r['ci95'][1]:+.1f}] ({100 * r['relative_difference']:+.1f} %)")
 json.dump(out, open("benchmarks/s19-paper-width-routing-pairs.json", "w"), indent=1)
