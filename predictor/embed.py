@@ -30,7 +30,11 @@ before.  So every text is encoded in a batch of exactly :data:`BATCH_ROWS`
 rows, padded to its own token count rounded up to :data:`PAD_STEP`: with the
 shape fixed, its vector is the same whatever texts share its batch and
 wherever it sits there.  The cache of these vectors is a directory of its own
-(``<model key>.rows64-pad8``), never mixed with vectors encoded otherwise.
+(``<model key>.rows64-pad8``), never mixed with vectors encoded otherwise.  Vectors
+encoded on a GPU differ from the CPU's in their last bits too, so they have their
+own directory (``….rows64-pad8-cuda``): a model trained on a GPU never reads
+vectors that a CPU run left in the cache (on an H200 it did, and its weights
+depended on what the cache held).
 """
 
 from __future__ import annotations
@@ -260,7 +264,8 @@ class Embedder:
     ) -> None:
         self.encoder = encoder or DEFAULT_ENCODER
         self.target, self.model_key = resolve_encoder(encoder)
-        cache_name = f"{self.model_key}.rows{BATCH_ROWS}-pad{PAD_STEP}"
+        kind = str(device).split(":")[0]
+        cache_name = f"{self.model_key}.rows{BATCH_ROWS}-pad{PAD_STEP}" + ("" if kind == "cpu" else f"-{kind}")
         self.cache = EmbeddingCache(cache_root(cache_dir) / "embeddings" / cache_name) if use_cache else None
         self.device = device
         self.verbose = verbose

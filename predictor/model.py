@@ -155,7 +155,11 @@ class DemandModel:
 
     def featurizer(self, cache_dir: str | None = None, verbose: bool = False) -> EventFeaturizer:
         f = self.meta["features"]
-        emb = Embedder(self.meta["encoder"]["name"], cache_dir or self.meta.get("cache_dir"), verbose=verbose)
+        # Texts are embedded on the kind of device the model was trained on where this machine has it, so a
+        # GPU-trained model reads the vectors its training wrote; elsewhere on the CPU.
+        trained_on = str(self.meta.get("training", {}).get("device_used", "cpu")).split(":")[0]
+        device = "cuda" if trained_on == "cuda" and torch.cuda.is_available() else "cpu"
+        emb = Embedder(self.meta["encoder"]["name"], cache_dir or self.meta.get("cache_dir"), device=device, verbose=verbose)
         if emb.model_key != self.meta["encoder"]["model_key"]:
             raise ConfigError(
                 f"encoder {self.meta['encoder']['name']!r} resolves to {emb.model_key}, but the model was trained with {self.meta['encoder']['model_key']}"

@@ -122,6 +122,14 @@ def test_an_embedding_does_not_depend_on_the_texts_encoded_with_it(tmp_path: Pat
     assert np.allclose(crowded[[9, 0, 20]], plain[[0, 1, 20]], atol=1e-5)  # the encoder's own output, up to rounding
 
 
+def test_gpu_vectors_are_cached_apart_from_the_cpus(tmp_path: Path) -> None:
+    """A GPU's vectors differ from the CPU's in the last bits: a model trained on one never reads the other's."""
+    from predictor.embed import Embedder
+
+    cpu, cuda, cuda0 = (Embedder(None, tmp_path, device=d).cache.dir for d in ("cpu", "cuda", "cuda:0"))
+    assert cpu.name.endswith(".rows64-pad8") and cuda == cuda0 == cpu.with_name(cpu.name + "-cuda")
+
+
 def test_max_reviews_limits_the_texts_embedded(world: TinyWorld) -> None:
     from predictor.embed import Embedder
     from predictor.features import EventFeaturizer
@@ -228,6 +236,15 @@ def test_no_event_network_never_sees_event_hours(world: TinyWorld, cache: Path) 
     assert len(y_event) > 0 and len(y_quiet) + len(y_event) == len(y_all)
     has = data.has_event()[: data.val_hour].ravel()
     assert np.array_equal(y_quiet, y_all[~has])
+
+
+def test_a_model_embeds_on_the_kind_of_device_it_was_trained_on(trained: Path) -> None:
+    from predictor.model import DemandModel
+
+    m = DemandModel.load(trained)
+    assert m.featurizer().embedder.device == m.meta["training"]["device_used"].split(":")[0]
+    m.meta["training"]["device_used"] = "cuda:0"
+    assert m.featurizer().embedder.device == ("cuda" if _has_cuda() else "cpu")
 
 
 def test_saved_model_predicts_identically(world: TinyWorld, trained: Path, cache: Path) -> None:
