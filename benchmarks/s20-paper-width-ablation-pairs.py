@@ -1,4 +1,4 @@
-"""Session 20: the ablation's surge rows with the paper-width predictor, paired per hour, beside the same pairs
+"""Session 20: the ablation's rows with the paper-width predictor, paired per hour, beside the same pairs
 with the reduced predictor (the full protocol's committed ablation). Run from the repository root:
 python benchmarks/s20-paper-width-ablation-pairs.py"""
 import json
@@ -16,4 +16,11 @@ out = compare(path, read_results(path), rows("benchmarks/s19-paper-width-routing
 ablation = FULL + "results-ablation.json"
 out += compare(ablation, read_results(ablation), rows(ablation), {},
                (("surge:base=ia", "surge"), ("surge:scope=map", "surge"), ("surge:prune=none,samples=100", "surge:samples=100")))
+# garces2023's certainty-equivalence rows with the paper-width model; its plain row is session 19's (session 18's weights).
+G, LIM, CNT = "garces2023:forecast=model", "garces2023:forecast=model,ce=limited", "garces2023:forecast=model,ce=counts"
+ce = "benchmarks/s20-paper-width-ce.json"
+borrowed = rows("benchmarks/s20-paper-width-ablation.json") | rows("benchmarks/s19-paper-width-garces-model.json")
+out += compare(ce, read_results(ce), borrowed, {P: P, f"{G},{M}": f"{G}, paper-width (session 18's weights)"},
+               ((f"{CNT},{M}", f"{G}, paper-width (session 18's weights)"), (f"{LIM},{M}", f"{CNT},{M}"), (P, f"{LIM},{M}")))
+out += compare(ablation, read_results(ablation), rows(ablation), {}, ((CNT, G), (LIM, CNT), ("surge", LIM)))
 json.dump(out, open("benchmarks/s20-paper-width-ablation-pairs.json", "w"), indent=1)
