@@ -1,10 +1,13 @@
-"""Content hashes that let two hosts check they hold the same city and run the same planner."""
+"""Content hashes that let two hosts check they hold the same city and run the same planner, and the host's name for its figures."""
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import json
+import os
+import platform
 from importlib import metadata
 from pathlib import Path
 
@@ -49,3 +52,15 @@ def code_version() -> str:
         h.update(path.relative_to(root).as_posix().encode())
         h.update(path.read_bytes())
     return f"surge {version}+{h.hexdigest()[:12]}"
+
+
+@functools.cache
+def machine() -> str:
+    """This host's processor and core count, kept with timings and trained weights: arithmetic and speed differ between hosts."""
+    name = platform.processor() or platform.machine()
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                name = line.split(":", 1)[1].strip()
+                break
+    return f"{name} x{os.cpu_count()}"

@@ -27,11 +27,9 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
-import functools
 import hashlib
 import json
 import os
-import platform
 import signal
 import sys
 import time
@@ -44,6 +42,7 @@ import numpy as np
 
 from agents.base import EpisodeContext, Policy, make_policy, parse_policy
 from city.errors import DataError
+from city.fingerprint import machine
 from city.graph import City
 from city.sim import EpisodeResult, FleetSim, Requests
 
@@ -121,18 +120,6 @@ def run_episode(
         controls[t] = u
         costs.append(sim.step(u))
     return sim.result(costs, controls, plan, cpu)
-
-
-@functools.cache
-def machine() -> str:
-    """This host's processor and core count, kept with each episode's planning seconds so that a report compares timings of one machine only."""
-    name = platform.processor() or platform.machine()
-    with contextlib.suppress(OSError):
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                name = line.split(":", 1)[1].strip()
-                break
-    return f"{name} x{os.cpu_count()}"
 
 
 def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict[str, dict] | None = None,

@@ -267,8 +267,12 @@ def predict(net: nn.Module, X: np.ndarray, batch: int = 8192) -> np.ndarray:
 def versions() -> dict:
     import platform
 
-    out = {"python": platform.python_version(), "torch": torch.__version__, "numpy": np.__version__}
-    for mod in ("sklearn", "sentence_transformers", "transformers"):
+    from city.fingerprint import machine
+
+    # The host too: the same command on another processor can give other weights (BENCHMARKS, session 20).
+    out = {"python": platform.python_version(), "torch": torch.__version__, "numpy": np.__version__,
+           "machine": machine(), "cpu_capability": torch.backends.cpu.get_cpu_capability()}
+    for mod in ("scipy", "sklearn", "sentence_transformers", "transformers"):
         try:
             out[mod] = __import__(mod).__version__
         except Exception:
