@@ -8,9 +8,9 @@ from coordinator.evaluate import instance_key, read_results
 FULL = "benchmarks/reproduce-full-synthetic/"
 
 
-def rows(path: str) -> dict:
-    """A results file's episodes by (instance, policy label)."""
-    return {(instance_key(e), e["policy"]): e for e in read_results(path)["episodes"]}
+def rows(doc: dict | str) -> dict:
+    """A results document's (or file's) episodes by (instance, policy label)."""
+    return {(instance_key(e), e["policy"]): e for e in (read_results(doc) if isinstance(doc, str) else doc)["episodes"]}
 
 
 def compare(path: str, doc: dict, ref: dict, borrowed: dict, pairs: tuple) -> list[dict]:

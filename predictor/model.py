@@ -157,8 +157,8 @@ class DemandModel:
         f = self.meta["features"]
         # Texts are embedded on the kind of device the model was trained on where this machine has it, so a
         # GPU-trained model reads the vectors its training wrote; elsewhere on the CPU.
-        trained_on = str(self.meta.get("training", {}).get("device_used", "cpu")).split(":")[0]
-        device = "cuda" if trained_on == "cuda" and torch.cuda.is_available() else "cpu"
+        trained_on = torch.device(self.meta.get("training", {}).get("device_used", "cpu")).type
+        device = resolve_device("auto").type if trained_on == "cuda" else "cpu"
         emb = Embedder(self.meta["encoder"]["name"], cache_dir or self.meta.get("cache_dir"), device=device, verbose=verbose)
         if emb.model_key != self.meta["encoder"]["model_key"]:
             raise ConfigError(
