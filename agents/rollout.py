@@ -50,10 +50,10 @@ unpruned decisions on seeded states.  The exact savings of
 non-pickup candidates for the agent alone, leave out taxis that cannot reach
 a pickup, transposed distance rows, one nearest-request search per node and
 step) are switchable, and
-``tests/test_planning_speed.py`` shows each leaves every decision as it was.
-Two approximations are options, off by default: ``adaptive`` (successive
+``tests/test_planning_speed.py`` shows each leaves every decision as it was,
+with and without the approximations.  Two approximations are options, off by default: ``adaptive`` (successive
 elimination of candidates on paired differences) and ``cap`` (the agent's
-nearest taxis only).
+nearest taxis only; with the greedy base, the nearest of those that can pick up).
 """
 
 from __future__ import annotations
@@ -190,21 +190,25 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
     keep[agent] = True
     rel_req = rel_node[req_pick]
     skip = False
-    if greedy and (sc.reach or sc.skip):
+    taxis = np.flatnonzero(keep)
+    useful = np.ones(taxis.size, dtype=bool)
+    capped = cfg.cap is not None and taxis.size > cfg.cap
+    if greedy and (sc.reach or sc.skip or capped):
         # Where a pickup can happen within the horizon: tracked requests and possible arrivals.
         spots = _pickup_spots(tab, sectors, mode, ctx.minute0, H, rel_node, req_pick[rel_req & alive0.any(axis=0)])
         if sc.skip and PICKUP not in cands:
             skip = not K.reaches(cands, np.ones(cands.size, np.int64), spots, H, city.dist).any()
-        if sc.reach and not skip:
-            others = np.flatnonzero(keep)
-            others = others[others != agent]
-            ok = K.reaches(pos1[0, others], tfree1[0, others].astype(np.int64), spots, H, city.dist)
-            keep[others[~ok]] = False
-    taxis = np.flatnonzero(keep)
-    if cfg.cap is not None and taxis.size > cfg.cap:
-        others = taxis[taxis != agent]
-        d = np.minimum(city.dist[here, obs.pos[others]], city.dist[obs.pos[others], here])
-        taxis = np.sort(np.concatenate([[agent], others[np.lexsort((others, d))[: cfg.cap - 1]]]))
+        if (sc.reach or capped) and not skip:
+            others = taxis != agent
+            useful[others] = K.reaches(pos1[0, taxis[others]], tfree1[0, taxis[others]].astype(np.int64), spots, H, city.dist)
+    # The cap ranks only taxis that can pick up (greedy base): the others never change a cost, so
+    # ``reach``, which leaves them out, stays exact under the cap.
+    chosen = useful.copy()
+    if cfg.cap is not None and chosen.sum() > cfg.cap:
+        ranked = np.flatnonzero(useful & (taxis != agent))
+        d = np.minimum(city.dist[here, obs.pos[taxis[ranked]]], city.dist[obs.pos[taxis[ranked]], here])
+        chosen[ranked[np.lexsort((taxis[ranked], d))[cfg.cap - 1:]]] = False
+    taxis = taxis[chosen | (~useful & (not sc.reach))]
     ag = int(np.searchsorted(taxis, agent))
     if sc.minute_lists and ctx.near is not None:
         e_pick, e_drop = req_pick, req_drop

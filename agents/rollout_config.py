@@ -45,6 +45,9 @@ class RolloutConfig:
     cap : int or None
         Approximation, off by default: simulate at most this many taxis, the
         agent and its nearest (in hops, either direction), besides the radius.
+        With the greedy base only taxis that can reach a possible pickup within
+        the horizon are ranked (the others never change a cost), so the exact
+        shortcuts stay exact under the cap.
     adaptive : float or None
         Approximation, off by default: run the samples in batches of
         ``batch`` and drop a candidate once its mean paired difference from
