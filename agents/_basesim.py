@@ -12,6 +12,28 @@ from numba import njit
 from agents._sampling import _BIG
 
 @njit(cache=True)
+def _fill_row(v: int, near: np.ndarray, near_d: np.ndarray, e_pick: np.ndarray, dist: np.ndarray) -> None:
+    """List at ``near[v]``/``near_d[v]`` the requests nearest to node ``v`` by ``(dist[v, pickup], code)``."""
+    r0 = e_pick.shape[0]
+    kk = near.shape[1]
+    row = dist[v]
+    m = 0
+    for r in range(r0):
+        d = np.int64(row[e_pick[r]])
+        if m == kk and d >= near_d[v, kk - 1]:
+            continue
+        j = m if m < kk else kk - 1
+        while j > 0 and near_d[v, j - 1] > d:
+            near[v, j] = near[v, j - 1]
+            near_d[v, j] = near_d[v, j - 1]
+            j -= 1
+        near[v, j] = r
+        near_d[v, j] = d
+        if m < kk:
+            m += 1
+
+
+@njit(cache=True)
 def _nearest(
     v: int,
     lb: int,
@@ -40,6 +62,8 @@ def _nearest(
     best_d = _BIG
     best_c = -1
     kl = near.shape[1]
+    if kl > 0 and near_d[v, 0] < 0:
+        _fill_row(v, near, near_d, e_pick, dist)
     for j in range(kl):
         r = near[v, j]
         if alive[r]:
@@ -86,12 +110,13 @@ def _oldest_at(
     """Code of the oldest alive request waiting at node ``v``, or -1."""
     r0 = e_pick.shape[0]
     kl = near.shape[1]
+    listed = kl > 0 and near_d[v, 0] >= 0
     j = 0
-    while j < kl and near_d[v, j] == 0:
+    while listed and j < kl and near_d[v, j] == 0:
         if alive[near[v, j]]:
             return near[v, j]
         j += 1
-    if j == kl and r0 > kl:
+    if (j == kl and r0 > kl) or not listed:
         for r in range(r0):
             if alive[r] and e_pick[r] == v:
                 return r

@@ -15,7 +15,10 @@ Conventions shared with :mod:`agents.rollout`:
   ordering reproduces the simulator's oldest-first tie-breaks.
 * ``near[v]``/``near_d[v]`` list the tracked requests nearest to node ``v``
   (:func:`nearest_lists`); when all of them are gone a search scans every
-  tracked request.
+  tracked request.  A row whose first distance is -1 is not listed yet: a
+  search from ``v`` lists it (:func:`unfilled_lists`), so a serial rollout
+  lists only the nodes its taxis visit.  The parallel kernel gets every row
+  listed first (:func:`fill_lists`).
 * A taxi is *free from step* ``tfree``: a taxi that picks up at step ``k``
   with trip length ``τ`` is free from step ``k + 1 + τ`` at its drop-off.  Busy
   taxis cannot act, so their intermediate positions are not tracked.
@@ -43,7 +46,7 @@ from numba import njit, prange
 # this import; a user's own setting wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from agents._basesim import _nearest, _shadow_greedy, _simulate_greedy, _simulate_ia
+from agents._basesim import _fill_row, _nearest, _shadow_greedy, _simulate_greedy, _simulate_ia
 from agents._sampling import (
     _BIG,
     GREEDY,
@@ -58,8 +61,8 @@ from agents._sampling import (
 
 #: What :mod:`agents.rollout` uses, from here and from the two modules above.
 __all__ = [
-    "GREEDY", "IA", "LIMITED_CE", "PICKUP", "STANDARD_CE", "arrival_count", "nearest_lists", "reaches",
-    "rollout_costs", "rollout_costs_serial", "sample_arrivals", "step_zero", "stream_key",
+    "GREEDY", "IA", "LIMITED_CE", "PICKUP", "STANDARD_CE", "arrival_count", "fill_lists", "nearest_lists", "reaches",
+    "rollout_costs", "rollout_costs_serial", "sample_arrivals", "step_zero", "stream_key", "unfilled_lists",
 ]
 
 @njit(cache=True)
@@ -68,30 +71,26 @@ def nearest_lists(dist: np.ndarray, pickups: np.ndarray, k: int) -> tuple[np.nda
 
     Returns the request indices and their distances, shape ``(n, min(k, R))`` each.
     """
-    n = dist.shape[0]
-    r0 = pickups.shape[0]
+    near, near_d = unfilled_lists(dist.shape[0], pickups.shape[0], k)
+    fill_lists(near, near_d, pickups, dist)
+    return near, near_d
+
+
+@njit(cache=True)
+def unfilled_lists(n: int, r0: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nearest_lists` with no row listed yet (distance -1): a serial rollout lists the nodes it visits."""
     kk = min(k, r0)
-    idx = np.empty((n, kk), dtype=np.int32)
-    dd = np.empty((n, kk), dtype=np.int16)
-    keys = np.empty(kk, dtype=np.int64)
-    for v in range(n):
-        m = 0
-        row = dist[v]
-        for r in range(r0):
-            key = np.int64(row[pickups[r]]) * r0 + r
-            if m == kk and key >= keys[kk - 1]:
-                continue
-            j = m if m < kk else kk - 1
-            while j > 0 and keys[j - 1] > key:
-                keys[j] = keys[j - 1]
-                j -= 1
-            keys[j] = key
-            if m < kk:
-                m += 1
-        for j in range(kk):
-            idx[v, j] = keys[j] % r0
-            dd[v, j] = keys[j] // r0
-    return idx, dd
+    return np.empty((n, kk), dtype=np.int32), np.full((n, kk), -1, dtype=np.int16)
+
+
+@njit(cache=True)
+def fill_lists(near: np.ndarray, near_d: np.ndarray, pickups: np.ndarray, dist: np.ndarray) -> None:
+    """List every row of :func:`unfilled_lists` not listed yet (threads must not list rows as they read them)."""
+    if near.shape[1] == 0:
+        return
+    for v in range(near.shape[0]):
+        if near_d[v, 0] < 0:
+            _fill_row(v, near, near_d, pickups, dist)
 
 
 @njit(cache=True)

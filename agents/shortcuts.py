@@ -38,6 +38,11 @@ class Shortcuts:
         Greedy base: taxis that look for their nearest request from the same
         node in the same step share one search (a herd with one target soon
         moves in lockstep).
+    lazy_lists : bool
+        A decision's nearest-request lists are made for the nodes its taxis
+        search from, when they first do, instead of for every node of the map
+        beforehand.  Serial rollouts only (the adaptive batches, a lone
+        thread's share of the cores); the parallel kernel gets them whole.
     """
 
     skip: bool = True
@@ -46,10 +51,11 @@ class Shortcuts:
     minute_lists: bool = False
     rows: bool = True
     share: bool = True
+    lazy_lists: bool = True
 
     @classmethod
     def none(cls) -> Shortcuts:
-        return cls(skip=False, shadow=False, reach=False, minute_lists=False, rows=False, share=False)
+        return cls(skip=False, shadow=False, reach=False, minute_lists=False, rows=False, share=False, lazy_lists=False)
 
 
 #: Nearest requests listed per node in the per-minute lists (a deeper list: pruned requests are in it).
