@@ -1,8 +1,10 @@
 """Session 21: the fast approximations against exact `surge`, approximation − exact per hour, and their planning CPU ratios.
 
 Run from the repository root: ``python benchmarks/s21-approx-fast-pairs.py``. It reads the committed results files,
-prints one line per pair and writes ``benchmarks/s21-approx-fast-pairs.json``.
+prints one line per pair and writes ``benchmarks/s21-approx-fast-pairs.json``. ``--files`` and ``--out`` pair other
+results files of the same policies (session 22's 1,000-taxi run).
 """
+import argparse
 import json
 import statistics
 from pathlib import Path
@@ -17,8 +19,12 @@ OUT = "benchmarks/s21-approx-fast-pairs.json"
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--files", nargs="+", default=list(FILES))
+    ap.add_argument("--out", default=OUT)
+    args = ap.parse_args()
     out = []
-    for path in FILES:
+    for path in args.files:
         doc = read_results(path)
         table = rows(doc)
         labels = [p for p in doc["config"]["policies"] if p.startswith("surge:")]
@@ -35,7 +41,7 @@ def main() -> None:
                 print(f"  {h} h {label:36s} − surge  n={r['n']} cheaper {r['wins']} ties {r['ties']}  "
                       f"Δ {r['cost_difference']:+.1f} [{r['ci95'][0]:+.1f}, {r['ci95'][1]:+.1f}] ({100 * r['relative_difference']:+.1f} %)"
                       f"  same decisions {same}  CPU exact/approx {c['median']:.2f}× ({c['min']:.2f}–{c['max']:.2f})")
-    Path(OUT).write_text(json.dumps(out, indent=1) + "\n")
+    Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -37,7 +37,10 @@ SHORTCUT_NAMES = tuple(f.name for f in dataclasses.fields(Shortcuts))
 
 
 def shortcut_variant(name: str):  # noqa: ANN201
-    """``all``, ``none`` or ``no-NAME`` as :class:`agents.shortcuts.Shortcuts`; a bad name is a :class:`ConfigError`."""
+    """``all`` (the defaults), ``none``, ``no-NAME`` or ``with-NAME`` as :class:`agents.shortcuts.Shortcuts`.
+
+    ``with-NAME`` turns on a saving that is off by default (``minute_lists``); a bad name is a :class:`ConfigError`.
+    """
     from city.errors import ConfigError
 
     if name == "all":
@@ -46,7 +49,9 @@ def shortcut_variant(name: str):  # noqa: ANN201
         return Shortcuts.none()
     if name.startswith("no-") and name[3:] in SHORTCUT_NAMES:
         return Shortcuts(**{name[3:]: False})
-    raise ConfigError(f"--variants: unknown variant {name!r}; choose all, none or no-NAME for NAME in {', '.join(SHORTCUT_NAMES)}")
+    if name.startswith("with-") and name[5:] in SHORTCUT_NAMES:
+        return Shortcuts(**{name[5:]: True})
+    raise ConfigError(f"--variants: unknown variant {name!r}; choose all, none, no-NAME or with-NAME for NAME in {', '.join(SHORTCUT_NAMES)}")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -84,8 +89,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     pl.add_argument("--threads", type=int, default=None, help="compiled-kernel threads (default: all cores)")
     pl.add_argument("--workers", type=int, default=1, help="threads planning independent agents at once (agents.waves)")
     pl.add_argument("--variants", nargs="+", default=["all"], metavar="VARIANT",
-                    help="exact-shortcut settings timed side by side on each step, in one process: all, none, or "
-                         f"no-NAME for NAME in {', '.join(SHORTCUT_NAMES)} (the first variant's controls are applied)")
+                    help="exact-shortcut settings timed side by side on each step, in one process: all (the defaults), none, "
+                         f"no-NAME or with-NAME for NAME in {', '.join(SHORTCUT_NAMES)} (the first variant's controls are applied)")
     pl.add_argument("--json", default=None)
     pl.set_defaults(func=bench_plan)
 
