@@ -17,8 +17,8 @@ Conventions shared with :mod:`agents.rollout`:
   (:func:`nearest_lists`); when all of them are gone a search scans every
   tracked request.  A row whose first distance is -1 is not listed yet: a
   search from ``v`` lists it (:func:`unfilled_lists`), so a serial rollout
-  lists only the nodes its taxis visit.  The parallel kernel gets every row
-  listed first (:func:`fill_lists`).
+  lists only the nodes its taxis visit.  The parallel kernel lists every row
+  first (:func:`fill_lists`).
 * A taxi is *free from step* ``tfree``: a taxi that picks up at step ``k``
   with trip length ``τ`` is free from step ``k + 1 + τ`` at its drop-off.  Busy
   taxis cannot act, so their intermediate positions are not tracked.
@@ -61,7 +61,7 @@ from agents._sampling import (
 
 #: What :mod:`agents.rollout` uses, from here and from the two modules above.
 __all__ = [
-    "GREEDY", "IA", "LIMITED_CE", "PICKUP", "STANDARD_CE", "arrival_count", "fill_lists", "nearest_lists", "reaches",
+    "GREEDY", "IA", "LIMITED_CE", "PICKUP", "STANDARD_CE", "arrival_count", "nearest_lists", "reaches",
     "rollout_costs", "rollout_costs_serial", "sample_arrivals", "step_zero", "stream_key", "unfilled_lists",
 ]
 
@@ -341,7 +341,7 @@ def rollout_costs(
 
     ``e_pick``/``e_drop`` are the outstanding requests the rollout tracks
     (codes ``0 … R-1``, oldest first) and ``near``/``near_d`` their
-    :func:`nearest_lists`.  Each sample's arrivals are drawn once and shared
+    :func:`nearest_lists`; rows not listed yet are listed first, before the threads read them.  Each sample's arrivals are drawn once and shared
     by all candidates (common random numbers).  Samples run in parallel in
     ``n_chunks`` contiguous chunks with per-chunk scratch space; the result
     does not depend on the number of threads or chunks.
@@ -357,6 +357,7 @@ def rollout_costs(
     n_samples = s_hi - s_lo
     out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)
     settled = np.zeros((alive0.shape[0], n_samples), dtype=np.bool_)
+    fill_lists(near, near_d, e_pick, dist)
     plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist, dist_t)
     n_chunks = max(1, min(n_samples, n_chunks))
     for chunk in prange(n_chunks):

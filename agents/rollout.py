@@ -158,8 +158,6 @@ class _Inputs:
     args: tuple
     ag: int
     shadow: np.ndarray
-    #: ``(near, near_d, e_pick)`` when the nearest-request lists are made as the rollout needs them (``Shortcuts.lazy_lists``).
-    unfilled: tuple | None = None
 
 
 def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _Inputs:
@@ -213,7 +211,6 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
         chosen[ranked[np.lexsort((taxis[ranked], d))[cfg.cap - 1:]]] = False
     taxis = taxis[chosen | (~useful & (not sc.reach))]
     ag = int(np.searchsorted(taxis, agent))
-    unfilled = None
     if sc.minute_lists and ctx.near is not None:
         e_pick, e_drop = req_pick, req_drop
         a0 = np.ascontiguousarray(alive0 & rel_req[None, :])
@@ -224,7 +221,6 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
         a0 = np.ascontiguousarray(alive0[:, tracked])
         if sc.lazy_lists:
             near, near_d = K.unfilled_lists(city.n_nodes, e_pick.size, NEAR_K)
-            unfilled = (near, near_d, e_pick)
         else:
             near, near_d = K.nearest_lists(city.dist, e_pick, NEAR_K)
     args = (
@@ -236,7 +232,7 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
         *(transposed(city) if sc.rows else (city.dist.T, city.next_hop.T)),
     )
     shadow = (cands != PICKUP) & (sc.shadow and greedy)
-    return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow), unfilled=unfilled)
+    return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow))
 
 
 def _pickup_spots(tab: DemandTables, sectors: np.ndarray, mode: int, minute0: int, horizon: int,
@@ -256,8 +252,6 @@ def _pickup_spots(tab: DemandTables, sectors: np.ndarray, mode: int, minute0: in
 def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray, serial: bool = False) -> tuple[np.ndarray, np.ndarray]:
     cfg = ctx.config
     kernel, chunks = (K.rollout_costs_serial, 1) if serial else (K.rollout_costs, 8 * numba.get_num_threads())
-    if not serial and inp.unfilled is not None:
-        K.fill_lists(*inp.unfilled, ctx.city.dist)
     return kernel(BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args, chunks)
 
 
