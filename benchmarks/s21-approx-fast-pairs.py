@@ -2,14 +2,17 @@
 
 Run from the repository root: ``python benchmarks/s21-approx-fast-pairs.py``. It reads the committed results files,
 prints one line per pair and writes ``benchmarks/s21-approx-fast-pairs.json``. ``--files`` and ``--out`` pair other
-results files of the same policies (session 22's 1,000-taxi run).
+results files of the same policies (session 22's 1,000-taxi run). Each label also gets a row over all hours (``"hour": "all"``):
+the mean of the instances' relative differences, (approximation − exact) ÷ exact, with its 95 % paired bootstrap CI.
 """
 import argparse
 import json
 import statistics
 from pathlib import Path
 
-from coordinator.analysis import compare_pair
+import numpy as np
+
+from coordinator.analysis import bootstrap_ci, compare_pair
 from coordinator.evaluate import instance_key, read_results
 from pairs import rows
 
@@ -41,6 +44,15 @@ def main() -> None:
                 print(f"  {h} h {label:36s} − surge  n={r['n']} cheaper {r['wins']} ties {r['ties']}  "
                       f"Δ {r['cost_difference']:+.1f} [{r['ci95'][0]:+.1f}, {r['ci95'][1]:+.1f}] ({100 * r['relative_difference']:+.1f} %)"
                       f"  same decisions {same}  CPU exact/approx {c['median']:.2f}× ({c['min']:.2f}–{c['max']:.2f})")
+        for label in labels:
+            both = [(table[(k, label)]["total_cost"], table[(k, "surge")]["total_cost"]) for k in sorted(done)]
+            rel = np.array([(a - e) / e for a, e in both])
+            lo, hi = bootstrap_ci(rel)
+            r = {"hour": "all", "policy": label, "against": "surge", "n": len(rel), "file": path, "wins": int((rel < 0).sum()),
+                 "mean_relative_difference": float(rel.mean()), "ci95_relative": [lo, hi]}
+            out.append(r)
+            print(f"  all  {label:36s} − surge  n={r['n']} cheaper {r['wins']}  "
+                  f"relative Δ {100 * rel.mean():+.2f} % [{100 * lo:+.2f}, {100 * hi:+.2f}]")
     Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
 
 
