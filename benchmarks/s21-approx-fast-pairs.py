@@ -3,7 +3,8 @@
 Run from the repository root: ``python benchmarks/s21-approx-fast-pairs.py``. It reads the committed results files,
 prints one line per pair and writes ``benchmarks/s21-approx-fast-pairs.json``. ``--files`` and ``--out`` pair other
 results files of the same policies (session 22's 1,000-taxi run). Each label also gets a row over all hours (``"hour": "all"``):
-the mean of the instances' relative differences, (approximation − exact) ÷ exact, with its 95 % paired bootstrap CI.
+the mean of the instances' relative differences, (approximation − exact) ÷ exact, with its 95 % paired bootstrap CI;
+``--pool`` adds one such row over the instances of every file (files of one map at different hours).
 """
 import argparse
 import json
@@ -21,12 +22,24 @@ FILES = ("benchmarks/s21-approx-fast-synthetic.json", "benchmarks/s21-approx-fas
 OUT = "benchmarks/s21-approx-fast-pairs.json"
 
 
+def pooled(costs: list[tuple[int, int]], label: str, where: str) -> dict:
+    """The row over several hours: the mean relative difference of (approximation, exact) costs, with its CI."""
+    rel = np.array([(a - e) / e for a, e in costs])
+    lo, hi = bootstrap_ci(rel)
+    print(f"  all  {label:36s} − surge  n={len(rel)} cheaper {int((rel < 0).sum())}  "
+          f"relative Δ {100 * rel.mean():+.2f} % [{100 * lo:+.2f}, {100 * hi:+.2f}]")
+    return {"hour": "all", "policy": label, "against": "surge", "n": len(rel), "file": where, "wins": int((rel < 0).sum()),
+            "mean_relative_difference": float(rel.mean()), "ci95_relative": [lo, hi]}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--files", nargs="+", default=list(FILES))
     ap.add_argument("--out", default=OUT)
+    ap.add_argument("--pool", action="store_true", help="also one row per label over the instances of every file")
     args = ap.parse_args()
     out = []
+    every: dict[str, list[tuple[int, int]]] = {}
     for path in args.files:
         doc = read_results(path)
         table = rows(doc)
@@ -46,13 +59,11 @@ def main() -> None:
                       f"  same decisions {same}  CPU exact/approx {c['median']:.2f}× ({c['min']:.2f}–{c['max']:.2f})")
         for label in labels:
             both = [(table[(k, label)]["total_cost"], table[(k, "surge")]["total_cost"]) for k in sorted(done)]
-            rel = np.array([(a - e) / e for a, e in both])
-            lo, hi = bootstrap_ci(rel)
-            r = {"hour": "all", "policy": label, "against": "surge", "n": len(rel), "file": path, "wins": int((rel < 0).sum()),
-                 "mean_relative_difference": float(rel.mean()), "ci95_relative": [lo, hi]}
-            out.append(r)
-            print(f"  all  {label:36s} − surge  n={r['n']} cheaper {r['wins']}  "
-                  f"relative Δ {100 * rel.mean():+.2f} % [{100 * lo:+.2f}, {100 * hi:+.2f}]")
+            every.setdefault(label, []).extend(both)
+            out.append(pooled(both, label, path))
+    if args.pool:
+        print(f"{len(args.files)} files pooled")
+        out += [pooled(both, label, " + ".join(args.files)) for label, both in every.items()]
     Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
 
 
