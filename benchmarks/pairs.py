@@ -2,7 +2,9 @@
 
 Run those scripts from the repository root (``python benchmarks/<script>.py``), which puts this folder on the path.
 """
-from coordinator.analysis import compare_pair
+import numpy as np
+
+from coordinator.analysis import bootstrap_ci, compare_pair
 from coordinator.evaluate import instance_key, read_results
 
 FULL = "benchmarks/reproduce-full-synthetic/"
@@ -11,6 +13,12 @@ FULL = "benchmarks/reproduce-full-synthetic/"
 def rows(doc: dict | str) -> dict:
     """A results document's (or file's) episodes by (instance, policy label)."""
     return {(instance_key(e), e["policy"]): e for e in (read_results(doc) if isinstance(doc, str) else doc)["episodes"]}
+
+
+def relative_change(costs: list[tuple[float, float]]) -> tuple[np.ndarray, tuple[float, float]]:
+    """(approximation − exact) ÷ exact per (approximation, exact) cost pair, and the 95 % bootstrap CI of its mean."""
+    rel = np.array([(a - e) / e for a, e in costs])
+    return rel, bootstrap_ci(rel)
 
 
 def compare(path: str, doc: dict, ref: dict, borrowed: dict, pairs: tuple) -> list[dict]:

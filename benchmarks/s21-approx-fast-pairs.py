@@ -11,11 +11,9 @@ import json
 import statistics
 from pathlib import Path
 
-import numpy as np
-
-from coordinator.analysis import bootstrap_ci, compare_pair
+from coordinator.analysis import compare_pair
 from coordinator.evaluate import instance_key, read_results
-from pairs import rows
+from pairs import relative_change, rows
 
 FILES = ("benchmarks/s21-approx-fast-synthetic.json", "benchmarks/s21-approx-fast-nyc.json",
          "benchmarks/s21-approx-manhattan-1000-20min.json")
@@ -24,8 +22,7 @@ OUT = "benchmarks/s21-approx-fast-pairs.json"
 
 def pooled(costs: list[tuple[int, int]], label: str, where: str) -> dict:
     """The row over several hours: the mean relative difference of (approximation, exact) costs, with its CI."""
-    rel = np.array([(a - e) / e for a, e in costs])
-    lo, hi = bootstrap_ci(rel)
+    rel, (lo, hi) = relative_change(costs)
     print(f"  all  {label:36s} − surge  n={len(rel)} cheaper {int((rel < 0).sum())}  "
           f"relative Δ {100 * rel.mean():+.2f} % [{100 * lo:+.2f}, {100 * hi:+.2f}]")
     return {"hour": "all", "policy": label, "against": "surge", "n": len(rel), "file": where, "wins": int((rel < 0).sum()),

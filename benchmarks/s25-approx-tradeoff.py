@@ -15,17 +15,17 @@ A setting whose run has fewer than :data:`MIN_SEEDS` instances at some hour is l
 import argparse
 import json
 import statistics
+from collections import Counter
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
-import numpy as np
 
-from coordinator.analysis import bootstrap_ci
+from coordinator.analysis import paired
 from coordinator.evaluate import instance_key, read_results
-from pairs import rows
+from pairs import relative_change
 
 MIN_SEEDS = 10
 SETTINGS = (
@@ -43,30 +43,24 @@ MARKERS = {"surge:adaptive=3": "^", "surge:cap=24": "v", "surge:adaptive=3,cap=2
 def setting_rows(name: str, files: tuple[str, ...]) -> list[dict]:
     """One row per approximation of a setting, its instances pooled over the setting's files and hours."""
     pairs: dict[str, list[tuple[dict, dict]]] = {}
-    hours: dict[str, dict[int, int]] = {}
     for path in files:
         doc = read_results(path)
-        table = rows(doc)
-        done = sorted({instance_key(e) for e in doc["episodes"]})
         for label in (p for p in doc["config"]["policies"] if p.startswith("surge:")):
-            both = [(table[(k, label)], table[(k, "surge")]) for k in done if (k, label) in table and (k, "surge") in table]
-            pairs.setdefault(label, []).extend(both)
-            for approx, _ in both:
-                hours.setdefault(label, {}).setdefault(approx["hour"], 0)
-                hours[label][approx["hour"]] += 1
+            both = [pair for h in doc["config"]["hours"] for pair in paired(doc, label, "surge", h)]
+            pairs.setdefault(label, []).extend(sorted(both, key=lambda pair: instance_key(pair[0])))
     out = []
     for label, both in pairs.items():
-        rel = np.array([(a["total_cost"] - e["total_cost"]) / e["total_cost"] for a, e in both])
+        per_hour = Counter(a["hour"] for a, _ in both)
+        rel, (lo, hi) = relative_change([(a["total_cost"], e["total_cost"]) for a, e in both])
         # Session 6's run recorded wall seconds only; their ratio is of wall time.
         clock = "plan_cpu_seconds_per_step" if all("plan_cpu_seconds_per_step" in a and "plan_cpu_seconds_per_step" in e
                                                    for a, e in both) else "plan_seconds_per_step"
         cpu = [e[clock] / a[clock] for a, e in both]
-        complete = min(hours[label].values()) >= MIN_SEEDS
-        lo, hi = bootstrap_ci(rel) if complete else (None, None)
+        complete = min(per_hour.values()) >= MIN_SEEDS
         out.append({"setting": name, "files": list(files), "policy": label, "against": "surge",
-                    "instances_per_hour": {str(h): n for h, n in sorted(hours[label].items())}, "complete": complete,
+                    "instances_per_hour": {str(h): n for h, n in sorted(per_hour.items())}, "complete": complete,
                     "n": len(rel), "cheaper": int((rel < 0).sum()), "mean_relative_difference": float(rel.mean()),
-                    "ci95_relative": None if lo is None else [lo, hi],
+                    "ci95_relative": [lo, hi] if complete else None,
                     "ratio_of": clock, "cpu_ratio_exact_over_approx": {"median": statistics.median(cpu), "min": min(cpu), "max": max(cpu)}})
         r = out[-1]
         ci = f"[{100 * lo:+.2f}, {100 * hi:+.2f}]" if complete else f"(incomplete: {r['instances_per_hour']} of {MIN_SEEDS} per hour, no CI)"
