@@ -11,7 +11,7 @@ import json
 import statistics
 from pathlib import Path
 
-from coordinator.analysis import compare_pair
+from coordinator.analysis import compare_pair, paired
 from coordinator.evaluate import instance_key, read_results
 from pairs import relative_change, rows
 
@@ -23,9 +23,10 @@ OUT = "benchmarks/s21-approx-fast-pairs.json"
 def pooled(costs: list[tuple[int, int]], label: str, where: str) -> dict:
     """The row over several hours: the mean relative difference of (approximation, exact) costs, with its CI."""
     rel, (lo, hi) = relative_change(costs)
-    print(f"  all  {label:36s} − surge  n={len(rel)} cheaper {int((rel < 0).sum())}  "
+    wins = int((rel < 0).sum())
+    print(f"  all  {label:36s} − surge  n={len(rel)} cheaper {wins}  "
           f"relative Δ {100 * rel.mean():+.2f} % [{100 * lo:+.2f}, {100 * hi:+.2f}]")
-    return {"hour": "all", "policy": label, "against": "surge", "n": len(rel), "file": where, "wins": int((rel < 0).sum()),
+    return {"hour": "all", "policy": label, "against": "surge", "n": len(rel), "file": where, "wins": wins,
             "mean_relative_difference": float(rel.mean()), "ci95_relative": [lo, hi]}
 
 
@@ -45,7 +46,7 @@ def main() -> None:
         print(f"{path}: {len(done)} instances")
         for h in sorted({k[1] for k in done}):
             for label in labels:
-                both = [(table[(k, label)], table[(k, "surge")]) for k in done if k[1] == h]
+                both = paired(doc, label, "surge", h)
                 ratio = [exact["plan_cpu_seconds_per_step"] / approx["plan_cpu_seconds_per_step"] for approx, exact in both]
                 c = {"median": statistics.median(ratio), "min": min(ratio), "max": max(ratio)}
                 same = sum(approx["decisions_sha256"] == exact["decisions_sha256"] for approx, exact in both)
