@@ -29,14 +29,15 @@ from pairs import relative_change
 
 MIN_SEEDS = 10
 SETTINGS = (
-    ("synthetic city, 100 taxis", ("benchmarks/i15-approx-synthetic-current.json", "benchmarks/s23-approx-fast-synthetic-25.json")),
-    ("real mid/lower-Manhattan map, 100 taxis", ("benchmarks/i15-approx-nyc.json", "benchmarks/s23-approx-fast-nyc-25.json")),
+    ("synthetic city, 100 taxis", ("benchmarks/i15-approx-synthetic-current.json", "benchmarks/s29-approx-fast-synthetic-25.json")),
+    ("real mid/lower-Manhattan map, 100 taxis", ("benchmarks/i15-approx-nyc.json", "benchmarks/s29-approx-fast-nyc-25.json")),
     ("all of Manhattan, 300 taxis", ("benchmarks/i15-approx-manhattan-300.json",)),
     ("all of Manhattan, 1,000 taxis, 20-minute episodes",
      ("benchmarks/s22-approx-manhattan-1000-20min.json", "benchmarks/s22-approx-manhattan-1000-20min-17h.json")),
-    ("all of Manhattan, 1,000 taxis, 60-minute episodes", ("benchmarks/s23-approx-manhattan-1000-60min.json",)),
+    ("all of Manhattan, 1,000 taxis, 60-minute episodes", ("benchmarks/s29-approx-manhattan-1000-60min-b50cap24.json",)),
 )
 MARKERS = {"surge:adaptive=3": "^", "surge:cap=24": "v", "surge:adaptive=3,cap=24": "D",
+           "surge:adaptive=2,batch=50,cap=24": "P",
            "surge:adaptive=2,batch=50,cap=16": "s", "surge:adaptive=2,batch=50,cap=12": "o"}
 
 
