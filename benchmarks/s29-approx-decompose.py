@@ -7,6 +7,8 @@ with the second and its cap with the first, so two paired comparisons on the sam
 * ``adaptive=2,batch=50,cap=24`` − ``adaptive=3,cap=24``: the sampling alone (cap 24 in both);
 * ``adaptive=2,batch=50,cap=12`` − ``adaptive=2,batch=50,cap=24``: the cap alone (the same sampling in both).
 
+Where a file holds them, it also pairs cap 16 with cap 24, and ``adaptive=2,batch=50,cap=24`` with exact ``surge``.
+
 Each is listed per hour (wins, mean difference, 95 % paired bootstrap CI) and over both hours as a mean relative
 difference with its CI, for every results file given (default: the 1,000-taxi and 100-taxi runs of session 29).
 It writes ``benchmarks/s29-approx-decompose.json``.
