@@ -21,6 +21,16 @@ def relative_change(costs: list[tuple[float, float]]) -> tuple[np.ndarray, tuple
     return rel, bootstrap_ci(rel)
 
 
+def pooled(costs: list[tuple[int, int]], policy: str, against: str, where: str, label: str | None = None) -> dict:
+    """The row over several hours: the mean of the instances' relative differences of (policy, against) costs, with its CI."""
+    rel, (lo, hi) = relative_change(costs)
+    wins = int((rel < 0).sum())
+    print(f"  all  {label or policy:36s} − {against}  n={len(rel)} cheaper {wins}  "
+          f"relative Δ {100 * rel.mean():+.2f} % [{100 * lo:+.2f}, {100 * hi:+.2f}]")
+    return {"hour": "all", "policy": policy, "against": against, "n": len(rel), "file": where, "wins": wins,
+            "mean_relative_difference": float(rel.mean()), "ci95_relative": [lo, hi]}
+
+
 def compare(path: str, doc: dict, ref: dict, borrowed: dict, pairs: tuple) -> list[dict]:
     """Pair ``pairs`` per hour over ``doc``'s instances, with rows of ``ref`` added under new labels (``borrowed``)."""
     inst = sorted({instance_key(e) for e in doc["episodes"]})

@@ -13,21 +13,11 @@ from pathlib import Path
 
 from coordinator.analysis import compare_pair, paired
 from coordinator.evaluate import instance_key, read_results
-from pairs import relative_change, rows
+from pairs import pooled, rows
 
 FILES = ("benchmarks/s21-approx-fast-synthetic.json", "benchmarks/s21-approx-fast-nyc.json",
          "benchmarks/s21-approx-manhattan-1000-20min.json")
 OUT = "benchmarks/s21-approx-fast-pairs.json"
-
-
-def pooled(costs: list[tuple[int, int]], label: str, where: str) -> dict:
-    """The row over several hours: the mean relative difference of (approximation, exact) costs, with its CI."""
-    rel, (lo, hi) = relative_change(costs)
-    wins = int((rel < 0).sum())
-    print(f"  all  {label:36s} − surge  n={len(rel)} cheaper {wins}  "
-          f"relative Δ {100 * rel.mean():+.2f} % [{100 * lo:+.2f}, {100 * hi:+.2f}]")
-    return {"hour": "all", "policy": label, "against": "surge", "n": len(rel), "file": where, "wins": wins,
-            "mean_relative_difference": float(rel.mean()), "ci95_relative": [lo, hi]}
 
 
 def main() -> None:
@@ -58,10 +48,10 @@ def main() -> None:
         for label in labels:
             both = [(table[(k, label)]["total_cost"], table[(k, "surge")]["total_cost"]) for k in sorted(done)]
             every.setdefault(label, []).extend(both)
-            out.append(pooled(both, label, path))
+            out.append(pooled(both, label, "surge", path))
     if args.pool:
         print(f"{len(args.files)} files pooled")
-        out += [pooled(both, label, " + ".join(args.files)) for label, both in every.items()]
+        out += [pooled(both, label, "surge", " + ".join(args.files)) for label, both in every.items()]
     Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from coordinator.analysis import compare_pair, paired
 from coordinator.evaluate import instance_key, read_results
-from pairs import relative_change
+from pairs import pooled
 
 FILES = ("benchmarks/s29-approx-manhattan-1000-60min-b50cap24.json", "benchmarks/s29-approx-fast-synthetic-25.json",
          "benchmarks/s29-approx-fast-nyc-25.json")
@@ -55,12 +55,7 @@ def main() -> None:
                       f"Δ {r['cost_difference']:+7.1f} [{r['ci95'][0]:+7.1f}, {r['ci95'][1]:+7.1f}]")
             if not both:
                 continue
-            rel, (lo, hi) = relative_change(both)
-            wins = int((rel < 0).sum())
-            out.append({"hour": "all", "policy": a, "against": b, "part": what, "file": path, "n": len(rel), "wins": wins,
-                        "mean_relative_difference": float(rel.mean()), "ci95_relative": [lo, hi]})
-            print(f"  all  {what:45s} n={len(rel):2d} cheaper {wins:2d}  relative Δ {100 * rel.mean():+.2f} % "
-                  f"[{100 * lo:+.2f}, {100 * hi:+.2f}]")
+            out.append({**pooled(both, a, b, path, label=what), "part": what})
     Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
     print(f"wrote {args.out}")
 
