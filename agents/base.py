@@ -38,7 +38,7 @@ class Option:
     """One declared option of a policy: its type, its range or choices, and named special values.
 
     ``kind`` is ``int``, ``float`` or ``str``; ``low``/``high`` bound numbers
-    (inclusive); ``choices`` lists the accepted strings; ``words`` maps
+    (inclusive; ``low`` exclusive with ``open_low``); ``choices`` lists the accepted strings; ``words`` maps
     accepted words (``auto``, ``none``) to the values they stand for; ``noun``
     says what a free text is (``a directory``).
     """
@@ -47,6 +47,7 @@ class Option:
     kind: type
     low: float | None = None
     high: float | None = None
+    open_low: bool = False
     choices: tuple[str, ...] | None = None
     words: dict[str, Any] = field(default_factory=dict)
     help: str = ""
@@ -61,7 +62,7 @@ class Option:
             if self.low is not None and self.high is not None:
                 text = f"{noun} from {_num(self.low)} to {_num(self.high)}"
             elif self.low is not None:
-                text = f"{noun} of at least {_num(self.low)}"
+                text = f"{noun} {'above' if self.open_low else 'of at least'} {_num(self.low)}"
             elif self.high is not None:
                 text = f"{noun} of at most {_num(self.high)}"
             else:
@@ -94,7 +95,8 @@ class Option:
             out = float(value)
             if not math.isfinite(out):
                 raise ValueError(value)
-        if (self.low is not None and out < self.low) or (self.high is not None and out > self.high):
+        too_low = self.low is not None and (out <= self.low if self.open_low else out < self.low)
+        if too_low or (self.high is not None and out > self.high):
             raise ValueError(value)
         return out
 

@@ -82,7 +82,7 @@ class RolloutPolicy(Policy):
         Option("seed", int, low=0, help="seed of every decision's random numbers"),
         Option("prune", int, low=0, words={"auto": "auto", "none": None}, help="pruning radius in hops"),
         Option("cap", int, low=1, words={"none": None}, help="approximation: simulate only the agent's k nearest taxis"),
-        Option("adaptive", float, low=0, words={"none": None},
+        Option("adaptive", float, low=0, open_low=True, words={"none": None},
                help="approximation: drop a candidate once it trails the best by this many standard errors"),
         Option("batch", int, low=2, help="samples per batch of adaptive"),
         Option("workers", int, low=1, help="threads planning independent agents of a minute concurrently"),

@@ -71,21 +71,29 @@ def scenario_spec(name: str, data_dir: Path | str | None = None, *, validate: bo
     ``validate=False`` skips the checks of names (see :func:`read_scenario_file`).
     """
     path = scenario_path(name)
+    if data_dir is not None and not Path(data_dir).is_dir():
+        raise ConfigError(f"data directory {data_dir} does not exist")
     if path is None:
         return None
     if name in SHIPPED and data_dir is None:
         raise ConfigError(f"scenario {name!r} needs --data DIR (a directory laid out like shared/data)")
-    if data_dir is not None and not Path(data_dir).is_dir():
-        raise ConfigError(f"data directory {data_dir} does not exist")
     return read_scenario_file(path, data_dir, validate=validate)
 
 
 def check_scenario(name: str, data_dir: Path | str | None) -> Path | None:
-    """Validate a scenario (its whole file, if any) and its data directory; the data directory it uses."""
+    """Validate a scenario (its whole file, if any) and its data directory; the data directory it uses.
+
+    The synthetic scenario reads no files: a ``--data`` given with it is
+    unused, and a warning says so, since a user who gave it most likely
+    meant a real map.
+    """
     spec = scenario_spec(name, data_dir)
     if spec is not None:
         return spec.data_dir
-    return Path(data_dir) if data_dir is not None else None
+    if data_dir is not None:
+        warnings.warn(f"the synthetic scenario reads no data: --data {data_dir} is not used "
+                      f"(give --scenario {' or '.join(SHIPPED)} or a scenario file to use it)", stacklevel=2)
+    return None
 
 
 def load_city(name: str, data_dir: Path | str | None = None, *, use_cache: bool = True, mmap: bool = False) -> City:
@@ -230,7 +238,7 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
     share = share if share is not None else share_from_env()
     if spec is None:
         world = synthetic_world(city, year=year, seed=seed, share=share or FLEET_SHARE)
-        return Scenario(name=name, city=city, world=world, data_dir=check_scenario(name, data_dir))
+        return Scenario(name=name, city=city, world=world, data_dir=None)
     world = build_world(spec, city, year=year, seed=seed, share=share)
     return Scenario(name=name, city=city, world=world, data_dir=spec.data_dir, spec=spec, schedules=world.schedules)
 

@@ -248,3 +248,12 @@ def test_trips_entries_in_order_of_preference_and_share_override(invented: Path)
     assert spec is not None and [len(t.files) for t in spec.trips] == [0, 1] and spec.trips[1].share is None
     assert load_scenario(str(path)).world.hourly_counts().sum() == 160  # every trip: no share given
     assert load_scenario(str(path), share=0.25).world.hourly_counts().sum() < 80
+
+
+def test_the_synthetic_scenario_says_it_reads_no_data(tmp_path: Path) -> None:
+    from city.scenario import check_scenario
+
+    with pytest.warns(UserWarning, match=r"synthetic scenario reads no data: --data .* is not used"):
+        assert check_scenario("synthetic", tmp_path) is None
+    with pytest.raises(ConfigError, match="data directory .*missing does not exist"):
+        check_scenario("synthetic", tmp_path / "missing")
