@@ -150,8 +150,9 @@ def add_city(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_city(args: argparse.Namespace) -> int:
-    from city.scenario import load_city
+    from city.scenario import check_scenario, load_city
 
+    check_scenario(args.scenario, args.data)
     t0 = time.perf_counter()
     city = load_city(args.scenario, args.data, use_cache=False)
     took = time.perf_counter() - t0
@@ -180,8 +181,9 @@ def add_demand(sub: argparse._SubParsersAction) -> None:
 
 def cmd_demand(args: argparse.Namespace) -> int:
     from city.demand import surge_report
-    from city.scenario import load_scenario
+    from city.scenario import check_scenario, load_scenario
 
+    check_scenario(args.scenario, args.data)
     scen = load_scenario(args.scenario, args.data)
     rows = surge_report(scen.world, dt.date.fromisoformat(args.date), args.hour)
     total = sum(r["expected"] for r in rows)

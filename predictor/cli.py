@@ -98,6 +98,7 @@ def _window(text: str) -> tuple[int, int]:
 
 # ---------------------------------------------------------------- handlers
 def train_main(args) -> int:
+    from city.scenario import check_scenario
     from predictor.inputs import load_world, record_inputs
     from predictor.cluster import Q_MAX
     from predictor.features import LAG_HOURS, LEAD_HOURS
@@ -113,6 +114,7 @@ def train_main(args) -> int:
         raise ConfigError(f"--max-reviews must be at least 1, got {args.max_reviews}")
     if args.reviews and not args.events:
         raise ConfigError("--reviews needs --events (the reviews are of those events)")
+    check_scenario(args.scenario, args.data)
     t0 = time.perf_counter()
     world, trips = load_world(args.scenario, args.data, seed=args.world_seed, year=args.year, events=args.events, reviews=args.reviews, trips=args.trips)
     log_line(f"world: scenario {args.scenario}, {world.city.n_sectors} sectors, {len(world.events)} events, built in {time.perf_counter() - t0:.1f}s")

@@ -1,0 +1,80 @@
+"""Kernel seconds of a policy's rollouts at `surge bench plan`'s state, replayed: a timing that tolerates a noisy machine.
+
+The policy plans a few minutes at the state of `surge bench plan` (2022-11-17,
+seed 0, 25 minutes of greedy play) while every call of the rollout kernel is
+captured.  The captured calls are then replayed as they were, ``--rounds``
+times, and the least and median total are printed: the least is the figure
+to compare, as noise on a shared machine only ever adds time.  Python's
+preparation of each decision is not in it.
+
+    PYTHONPATH=. python benchmarks/s30-kernel-replay.py --label surge:adaptive=2,batch=50,cap=12 --data ../shared/data
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import time
+
+import numpy as np
+
+import agents.rollout as R
+from agents.base import EpisodeContext, make_policy, parse_policy
+from agents.greedy import greedy_controls
+from city.scenario import load_scenario
+from city.sim import FleetSim
+from coordinator.evaluate import episode_requests, initial_positions
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--label", required=True, help="policy label, e.g. surge:adaptive=2,batch=50,cap=24")
+    ap.add_argument("--scenario", default="nyc")
+    ap.add_argument("--data", default=None)
+    ap.add_argument("--taxis", type=int, default=100)
+    ap.add_argument("--steps", type=int, default=5)
+    ap.add_argument("--hour", type=int, default=19)
+    ap.add_argument("--rounds", type=int, default=9)
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    scen = load_scenario(args.scenario, args.data)
+    city, date, warm = scen.city, dt.date(2022, 11, 17), 25
+    sim = FleetSim(city, episode_requests(scen.world, date, args.hour, warm + args.steps + 1), initial_positions(city, args.taxis, 0))
+    for _ in range(warm):
+        sim.step(greedy_controls(city, sim.observe()))
+    name, own = parse_policy(args.label)
+    policy = make_policy(name, city, forecast="true-rate", **own)
+    policy.reset(EpisodeContext(city, date, args.hour, warm + args.steps + 1, 0, scen.world))
+    policy.act(sim.observe())  # loads the compiled kernels
+    calls = []
+    run = R._run
+
+    def capture(ctx, inp, lo, hi, active, serial=False):  # noqa: ANN001, ANN202
+        calls.append((ctx, inp, lo, hi, active.copy(), serial))
+        return run(ctx, inp, lo, hi, active, serial)
+
+    R._run = capture
+    try:
+        for _ in range(args.steps):
+            sim.step(policy.act(sim.observe()))
+    finally:
+        R._run = run
+    totals = []
+    for _ in range(args.rounds):
+        t0 = time.perf_counter()
+        for call in calls:
+            run(*call)
+        totals.append(time.perf_counter() - t0)
+    out = {"label": args.label, "scenario": args.scenario, "taxis": args.taxis, "hour": args.hour, "steps": args.steps,
+           "kernel_calls": len(calls), "rounds": args.rounds, "kernel_seconds_min": min(totals),
+           "kernel_seconds_median": float(np.median(totals)), "kernel_seconds": totals}
+    print(f"{args.label}: {len(calls)} kernel calls over {args.steps} steps, replayed {args.rounds}×: "
+          f"least {min(totals):.4f} s, median {np.median(totals):.4f} s")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(out, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
