@@ -54,8 +54,7 @@ step, nearest-request lists made as taxis need them) are switchable, and
 with and without the approximations.  Two approximations are options, off by
 default: ``adaptive`` (successive elimination of candidates on paired
 differences) and ``cap`` (the agent's nearest taxis only; with the greedy
-base, the nearest of those that can pick up), or ``cap_nodes`` (the taxis at
-the agent's nearest nodes where taxis stand).
+base, the nearest of those that can pick up).
 """
 
 from __future__ import annotations
@@ -194,7 +193,7 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
     skip = False
     taxis = np.flatnonzero(keep)
     useful = np.ones(taxis.size, dtype=bool)
-    capped = (cfg.cap is not None and taxis.size > cfg.cap) or (cfg.cap_nodes is not None and taxis.size > 1)
+    capped = cfg.cap is not None and taxis.size > cfg.cap
     if greedy and (sc.reach or sc.skip or capped):
         # Where a pickup can happen within the horizon: tracked requests and possible arrivals.
         spots = _pickup_spots(tab, sectors, mode, ctx.minute0, H, rel_node, req_pick[rel_req & alive0.any(axis=0)])
@@ -210,10 +209,6 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
         ranked = np.flatnonzero(useful & (taxis != agent))
         order, _ = cap_ranking(city, obs, here, taxis[ranked])
         chosen[ranked[order[cfg.cap - 1:]]] = False
-    if cfg.cap_nodes is not None and chosen.sum() > 1:
-        ranked = np.flatnonzero(chosen & (taxis != agent))
-        order, _ = cap_ranking(city, obs, here, taxis[ranked])
-        chosen[ranked[order[_node_ranks(here, obs.pos[taxis[ranked[order]]]) >= cfg.cap_nodes]]] = False
     taxis = taxis[chosen | (~useful & (not sc.reach))]
     ag = int(np.searchsorted(taxis, agent))
     if sc.minute_lists and ctx.near is not None:
@@ -244,15 +239,6 @@ def cap_ranking(city: City, obs: Observation, here: int, taxis: np.ndarray) -> t
     """The order in which the cap keeps ``taxis``, nearest to ``here`` first (hops, either direction; lower id on ties), and their hops."""
     d = np.minimum(city.dist[here, obs.pos[taxis]], city.dist[obs.pos[taxis], here])
     return np.lexsort((taxis, d)), d
-
-
-def _node_ranks(here: int, nodes: np.ndarray) -> np.ndarray:
-    """For taxis standing at ``nodes`` (nearest first), the rank of their node among the distinct nodes, ``here`` being rank 0."""
-    seq = np.concatenate([[here], nodes])
-    uniq, first = np.unique(seq, return_index=True)
-    rank = np.empty(first.size, dtype=np.int64)
-    rank[np.argsort(first)] = np.arange(first.size)
-    return rank[np.searchsorted(uniq, nodes)]
 
 
 def _pickup_spots(tab: DemandTables, sectors: np.ndarray, mode: int, minute0: int, horizon: int,

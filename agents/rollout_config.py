@@ -48,13 +48,6 @@ class RolloutConfig:
         With the greedy base only taxis that can reach a possible pickup within
         the horizon are ranked (the others never change a cost), so the exact
         shortcuts stay exact under the cap.
-    cap_nodes : int or None
-        Approximation, off by default: simulate only the taxis at the agent's
-        node and at the nearest other nodes where taxis stand, this many
-        nodes in all, ranked as ``cap`` ranks taxis.  Free taxis crowd onto
-        a few nodes where the fleet is dense (a greedy herd moves as one), so
-        a count of taxis covers a few hops there and many where the fleet is
-        sparse; a count of nodes covers about the same ground in both.
     adaptive : float or None
         Approximation, off by default: run the samples in batches of
         ``batch`` and drop a candidate once its mean paired difference from
@@ -72,7 +65,6 @@ class RolloutConfig:
     seed: int = 0
     prune: int | None = None
     cap: int | None = None
-    cap_nodes: int | None = None
     adaptive: float | None = None
     batch: int = 100
 
@@ -89,8 +81,6 @@ class RolloutConfig:
             raise ConfigError(f"rollout: prune radius must be non-negative, got {self.prune}")
         if self.cap is not None and self.cap < 1:
             raise ConfigError(f"rollout: cap must be at least 1 taxi, got {self.cap}")
-        if self.cap_nodes is not None and self.cap_nodes < 1:
-            raise ConfigError(f"rollout: cap_nodes must be at least 1 node, got {self.cap_nodes}")
         if self.adaptive is not None and not self.adaptive > 0:
             raise ConfigError(f"rollout: adaptive must be a positive number of standard errors, got {self.adaptive}")
         if self.batch < 2:

@@ -55,7 +55,7 @@ class RolloutPolicy(Policy):
         See :class:`RolloutConfig`.
     prune : int or None or "auto"
         Pruning radius in hops; ``"auto"`` is :func:`default_prune` of the horizon.
-    cap, cap_nodes, adaptive, batch :
+    cap, adaptive, batch :
         Approximations, off by default; see :class:`RolloutConfig`.
     workers : int, optional
         Threads planning independent agents at once (:mod:`agents.waves`,
@@ -82,8 +82,6 @@ class RolloutPolicy(Policy):
         Option("seed", int, low=0, help="seed of every decision's random numbers"),
         Option("prune", int, low=0, words={"auto": "auto", "none": None}, help="pruning radius in hops"),
         Option("cap", int, low=1, words={"none": None}, help="approximation: simulate only the agent's k nearest taxis"),
-        Option("cap_nodes", int, low=1, words={"none": None},
-               help="approximation: simulate only the taxis at the agent's k nearest nodes where taxis stand"),
         Option("adaptive", float, low=0, open_low=True, words={"none": None},
                help="approximation: drop a candidate once it trails the best by this many standard errors"),
         Option("batch", int, low=2, help="samples per batch of adaptive"),
@@ -119,7 +117,6 @@ class RolloutPolicy(Policy):
         seed: int | None = None,
         prune: int | str | None = "auto",
         cap: int | None = None,
-        cap_nodes: int | None = None,
         adaptive: float | None = None,
         batch: int | None = None,
     ) -> RolloutConfig:
@@ -135,7 +132,6 @@ class RolloutPolicy(Policy):
             seed=int(seed if seed is not None else 0),
             prune=default_prune(H) if prune == "auto" else (None if prune is None else int(prune)),
             cap=None if cap is None else int(cap),
-            cap_nodes=None if cap_nodes is None else int(cap_nodes),
             adaptive=None if adaptive is None else float(adaptive),
             batch=int(batch) if batch is not None else 100,
         )

@@ -99,14 +99,14 @@ def test_exact_shortcuts_change_no_decision(city: City, base: str) -> None:
         assert settled > 0  # the shortcuts did take over work, so the comparison means something
 
 
-@pytest.mark.parametrize("approx", [{"cap": 4}, {"adaptive": 2.0, "batch": 16, "cap": 6}, {"cap_nodes": 3}])
+@pytest.mark.parametrize("approx", [{"cap": 4}, {"adaptive": 2.0, "batch": 16, "cap": 6}])
 def test_exact_shortcuts_change_no_decision_under_the_approximations(city: City, approx: dict) -> None:
     # Seed 0 binds the cap where ``reach`` drops taxis: when the cap ranked taxis after ``reach`` had
     # dropped some, flipping ``reach`` changed a decision here (session 21's finding).
     assert shortcuts_settled(city, range(2), **approx) > 0
 
 
-@pytest.mark.parametrize("approx", [{"adaptive": 2.0, "batch": 16}, {"cap": 8}, {"cap_nodes": 4}])
+@pytest.mark.parametrize("approx", [{"adaptive": 2.0, "batch": 16}, {"cap": 8}])
 def test_approximations_are_deterministic_for_a_seed(city: City, approx: dict) -> None:
     obs = seeded_state(city, 5)
     fc = forecast(city, np.random.default_rng(5))
@@ -149,11 +149,3 @@ def test_bench_plan_reports_variants_side_by_side(tmp_path: Path) -> None:
     assert "ms per free taxi" in proc.stdout and "same decisions" in proc.stdout
     bad = run_cli("bench", "plan", "--variants", "no-magic")
     assert bad.returncode != 0 and "unknown variant 'no-magic'" in bad.stderr
-
-
-def test_the_node_cap_ranks_nodes_by_their_nearest_taxi_with_the_agents_node_first() -> None:
-    from agents.rollout import _node_ranks
-
-    # taxis nearest first at nodes 7, 5, 7, 3, 9; the agent stands at 5
-    np.testing.assert_array_equal(_node_ranks(5, np.array([7, 5, 7, 3, 9])), [1, 0, 1, 2, 3])
-    np.testing.assert_array_equal(_node_ranks(4, np.array([4, 4, 8])), [0, 0, 1])
