@@ -15,19 +15,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import datetime as dt
 import json
 
 import numpy as np
 
 import agents.rollout as R
-from agents.base import EpisodeContext, make_policy
-from agents.greedy import greedy_controls
-from city.scenario import load_scenario
-from city.sim import FleetSim
-from coordinator.evaluate import episode_requests, initial_positions
+from bench_state import bench_state, state_args
 
-POLICY = {"adaptive": 2.0, "batch": 50, "cap": 24}
+POLICY = "surge:adaptive=2,batch=50,cap=24"
 
 
 def quantiles(xs: list[int]) -> dict | None:
@@ -38,20 +33,10 @@ def quantiles(xs: list[int]) -> dict | None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenario", default="nyc")
-    ap.add_argument("--data", default=None)
-    ap.add_argument("--taxis", type=int, default=100)
-    ap.add_argument("--steps", type=int, default=5)
-    ap.add_argument("--hour", type=int, default=19)
+    state_args(ap)
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
-    scen = load_scenario(args.scenario, args.data)
-    city, date, warm = scen.city, dt.date(2022, 11, 17), 25
-    sim = FleetSim(city, episode_requests(scen.world, date, args.hour, warm + args.steps + 1), initial_positions(city, args.taxis, 0))
-    for _ in range(warm):
-        sim.step(greedy_controls(city, sim.observe()))
-    policy = make_policy("surge", city, forecast="true-rate", **POLICY)
-    policy.reset(EpisodeContext(city, date, args.hour, warm + args.steps + 1, 0, scen.world))
+    city, sim, policy = bench_state(args, POLICY)
     horizon = policy.config.horizon
     seen: list[np.ndarray] = []
     rank = R.cap_ranking
@@ -81,7 +66,7 @@ def main() -> None:
         sim.step(u)
     out = {
         "scenario": args.scenario, "taxis": args.taxis, "hour": args.hour, "steps": args.steps, "decisions": len(rows),
-        "policy": "surge:adaptive=2,batch=50,cap=24", "horizon": horizon, "prune": policy.config.prune,
+        "policy": POLICY, "horizon": horizon, "prune": policy.config.prune,
         "ranked_taxis": quantiles([r["others"] for r in rows]),
         "ranked_within_horizon_hops": quantiles([r["within_h"] for r in rows]),
         "ranked_at_the_agents_node": quantiles([r["same_node"] for r in rows]),

@@ -13,39 +13,23 @@ preparation of each decision is not in it.
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
 import time
 
 import numpy as np
 
 import agents.rollout as R
-from agents.base import EpisodeContext, make_policy, parse_policy
-from agents.greedy import greedy_controls
-from city.scenario import load_scenario
-from city.sim import FleetSim
-from coordinator.evaluate import episode_requests, initial_positions
+from bench_state import bench_state, state_args
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--label", required=True, help="policy label, e.g. surge:adaptive=2,batch=50,cap=24")
-    ap.add_argument("--scenario", default="nyc")
-    ap.add_argument("--data", default=None)
-    ap.add_argument("--taxis", type=int, default=100)
-    ap.add_argument("--steps", type=int, default=5)
-    ap.add_argument("--hour", type=int, default=19)
+    state_args(ap)
     ap.add_argument("--rounds", type=int, default=9)
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
-    scen = load_scenario(args.scenario, args.data)
-    city, date, warm = scen.city, dt.date(2022, 11, 17), 25
-    sim = FleetSim(city, episode_requests(scen.world, date, args.hour, warm + args.steps + 1), initial_positions(city, args.taxis, 0))
-    for _ in range(warm):
-        sim.step(greedy_controls(city, sim.observe()))
-    name, own = parse_policy(args.label)
-    policy = make_policy(name, city, forecast="true-rate", **own)
-    policy.reset(EpisodeContext(city, date, args.hour, warm + args.steps + 1, 0, scen.world))
+    _, sim, policy = bench_state(args, args.label)
     policy.act(sim.observe())  # loads the compiled kernels
     calls = []
     run = R._run
