@@ -319,6 +319,7 @@ def _simulate_greedy(
 def _shadow_greedy(
     horizon: int,
     c: int,
+    ref: int,
     pos: int,
     tgt: int,
     d0: int,
@@ -344,18 +345,19 @@ def _shadow_greedy(
     """Candidate ``c``'s rollout replayed for the deciding agent alone; the candidate whose cost it has, or -1.
 
     Greedy taxis interact only through pickups, so until the agent first
-    stands at its target (in ``c`` or in the reference candidate 0) every
-    other taxi of ``c`` does exactly what it does in candidate 0, whose
-    pickups (``ev_step``/``ev_code``) are replayed here.  If neither agent
+    stands at its target (in ``c`` or in the reference candidate ``ref``, an
+    earlier one that is not a pickup) every other taxi of ``c`` does exactly
+    what it does in ``ref``, whose pickups (``ev_step``/``ev_code``) are
+    replayed here.  If neither agent
     reaches a pickup within the horizon the two costs are equal; if at the
     start of a step the agent's (node, target) equals that of a fully
     simulated candidate ``f`` (``full[f]``) that has not picked up yet either,
     the whole states agree and so do the rest of the rollouts.  Otherwise
-    -1: ``c`` needs a full simulation.  ``alive`` holds candidate 0's alive
+    -1: ``c`` needs a full simulation.  ``alive`` holds ``ref``'s alive
     flags at step 1 (arrivals included) and is modified.
     """
     r0 = e_pick.shape[0]
-    t_ref = rec_t[0]
+    t_ref = rec_t[ref]
     kanc = 1
     need = False
     n_act = 0
@@ -365,7 +367,7 @@ def _shadow_greedy(
         if k > t_ref:
             return -1
         if k == horizon + 1:
-            return 0
+            return ref
         v = pos
         if tgt >= 0:
             v = _walk(v, e_pick[tgt] if tgt < r0 else a_pick[tgt - r0], min(k - kanc, d0), hop_t)

@@ -233,6 +233,14 @@ def _run_samples(
     need = np.empty(mt, dtype=np.bool_)
     heap = np.empty(mt + 1, dtype=np.int64)
     use_shadow = base == GREEDY and ag >= 0 and shadow[0]
+    # The reference of the shadow replays: the first candidate still in play that can be replayed (a
+    # dropped candidate is not simulated to serve as one).
+    ref = -1
+    if use_shadow:
+        for c in range(n_c):
+            if active[c] and shadow[c]:
+                ref = c
+                break
     n_ev_cap = r0 + cap if use_shadow else 0
     ev_step = np.empty(n_ev_cap, dtype=np.int32)
     ev_code = np.empty(n_ev_cap, dtype=np.int64)
@@ -257,14 +265,14 @@ def _run_samples(
         for c in range(n_c):
             full[c] = False
             settled[c, col] = False
-            if not active[c] and not (use_shadow and c == 0):
+            if not active[c]:
                 out[c, col] = 0
                 continue
-            if use_shadow and c > 0 and shadow[c]:
-                alive[:r0] = alive0[0]
+            if ref >= 0 and c > ref and shadow[c]:
+                alive[:r0] = alive0[ref]
                 alive[r0 : r0 + n_arr] = True
                 f = _shadow_greedy(
-                    horizon, c, pos1[c, ag], plan_c[c, ag], plan_d[c, ag], alive, n_arr, a_pick, a_step,
+                    horizon, c, ref, pos1[c, ag], plan_c[c, ag], plan_d[c, ag], alive, n_arr, a_pick, a_step,
                     e_pick, near, near_d, dist, dist_t, hop_t, act, ev_step, ev_code, n_ev, full, rec_pos, rec_tgt, rec_t,
                 )
                 if f >= 0:
@@ -281,8 +289,8 @@ def _run_samples(
             if base == GREEDY:
                 rec = use_shadow and shadow[c]
                 rec_ag = ag if rec else -1
-                steps = ev_step if (rec and c == 0) else no_ev
-                codes = ev_code if (rec and c == 0) else no_code
+                steps = ev_step if c == ref else no_ev
+                codes = ev_code if c == ref else no_code
                 cost, t_first, nev = _simulate_greedy(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t, act, target, seen, best_d, need, free,
@@ -291,7 +299,7 @@ def _run_samples(
                 out[c, col] = g0 + cost
                 rec_t[c] = t_first
                 full[c] = rec
-                if c == 0:
+                if c == ref:
                     n_ev = nev
             else:
                 out[c, col] = g0 + _simulate_ia(

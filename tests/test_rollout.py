@@ -136,6 +136,32 @@ def test_rollout_costs_equal_exhaustive_simulation(base: str, ce: str, scope: st
             u[agent] = best
 
 
+def test_candidates_still_in_play_keep_the_simulated_costs_when_the_first_are_dropped() -> None:
+    """``adaptive`` drops candidates as it goes; the shadow replays then take the first candidate still
+    in play as their reference, instead of simulating a dropped one for it.  Costs stay the simulator's."""
+    from agents.rollout import _decision_inputs, _run
+
+    city = grid_city(7, 6)
+    shadowed = 0
+    # Busy and sparse demand: replays settle by merging, and by neither agent picking up at all.
+    for seed, eta, requests in [(0, [0.6, 1.4, 0.2, 2.0], 7), (1, [0.6, 1.4, 0.2, 2.0], 7), (2, [0.02] * 4, 2), (3, [0.05] * 4, 1)]:
+        fc = uniform_forecast(city, eta)
+        obs = random_state(city, np.random.default_rng(seed), taxis=6, requests=requests)
+        ctx = context(city, obs, fc, horizon=4, samples=12, seed=seed)
+        u = ctx.base_controls.copy()
+        for agent in np.flatnonzero(obs.tau == 0):
+            inp = _decision_inputs(ctx, u[:agent], int(agent))
+            ref = reference_costs(ctx, u[:agent], int(agent))
+            for dropped in range(1, inp.cands.size - 1):
+                active = np.arange(inp.cands.size) >= dropped
+                costs, settled = _run(ctx, inp, 0, ctx.config.samples, active, serial=True)
+                np.testing.assert_array_equal(costs[active], ref[active])
+                assert not costs[~active].any() and not settled[:dropped].any()
+                shadowed += int(settled.sum())
+            u[agent] = plan_agent(ctx, u[:agent], int(agent))
+    assert shadowed > 0  # replays against a later reference did settle costs
+
+
 def test_taxis_on_one_node_share_their_search_and_keep_the_simulated_costs() -> None:
     """A herd: ten free taxis on three nodes look for their nearest request from the same nodes in
     the same steps, so the greedy base's searches are shared (``Shortcuts.share``); every cost is
