@@ -6,12 +6,10 @@ on the path.
 import argparse
 import datetime as dt
 
-from agents.base import EpisodeContext, Policy, make_policy, parse_policy
-from agents.greedy import greedy_controls
+from agents.base import Policy, make_policy, parse_policy
 from city.graph import City
-from city.scenario import load_scenario
 from city.sim import FleetSim
-from coordinator.evaluate import episode_requests, initial_positions
+from coordinator.bench import plan_state
 
 DATE = dt.date(2022, 11, 17)
 WARMUP = 25
@@ -28,12 +26,8 @@ def state_args(ap: argparse.ArgumentParser) -> None:
 
 def bench_state(args: argparse.Namespace, label: str) -> tuple[City, FleetSim, Policy]:
     """The city, the simulator after the greedy warm-up, and the policy ``label`` (true-rate forecast) reset for the episode."""
-    scen = load_scenario(args.scenario, args.data)
-    minutes = WARMUP + args.steps + 1
-    sim = FleetSim(scen.city, episode_requests(scen.world, DATE, args.hour, minutes), initial_positions(scen.city, args.taxis, 0))
-    for _ in range(WARMUP):
-        sim.step(greedy_controls(scen.city, sim.observe()))
+    scen, sim, episode = plan_state(args.scenario, args.data, DATE, args.hour, args.taxis, 0, WARMUP, args.steps)
     name, own = parse_policy(label)
     policy = make_policy(name, scen.city, **{"forecast": "true-rate", **own})
-    policy.reset(EpisodeContext(scen.city, DATE, args.hour, minutes, 0, scen.world))
+    policy.reset(episode)
     return scen.city, sim, policy

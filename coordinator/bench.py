@@ -10,11 +10,17 @@ import os
 import statistics
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from agents.shortcuts import Shortcuts
 from coordinator.args import hour, iso_date, positive, rollout_options, scenario_args
+
+if TYPE_CHECKING:
+    from agents.base import EpisodeContext
+    from city.scenario import Scenario
+    from city.sim import FleetSim
 
 
 def _stats(xs: list[float]) -> dict:
@@ -175,34 +181,46 @@ def bench_sim(args: argparse.Namespace) -> int:
     return 0
 
 
+def plan_state(scenario: str, data: str | None, date: dt.date, hour: int, taxis: int, seed: int, warmup: int,
+               steps: int) -> tuple[Scenario, FleetSim, EpisodeContext]:
+    """The mid-episode state that ``surge bench plan`` times: ``warmup`` minutes of greedy play from the seeded fleet.
+
+    Returns the scenario, the simulator at the first timed step, and the
+    episode's context (``warmup + steps + 1`` minutes) to reset a policy with.
+    """
+    from agents.base import EpisodeContext
+    from agents.greedy import greedy_controls
+    from city.scenario import load_scenario
+    from city.sim import FleetSim
+    from coordinator.evaluate import episode_requests, initial_positions
+
+    scen = load_scenario(scenario, data)
+    minutes = warmup + steps + 1
+    sim = FleetSim(scen.city, episode_requests(scen.world, date, hour, minutes), initial_positions(scen.city, taxis, seed))
+    for _ in range(warmup):
+        sim.step(greedy_controls(scen.city, sim.observe()))
+    return scen, sim, EpisodeContext(scen.city, date, hour, minutes, seed, scen.world)
+
+
 def _plan_child(args: argparse.Namespace, label: str) -> dict:
     """Time ``label``'s planning in this (fresh) process; see :func:`bench_plan`."""
     import hashlib
 
     import numba
 
-    from agents.base import EpisodeContext, make_policy, parse_policy
-    from agents.greedy import greedy_controls
+    from agents.base import make_policy, parse_policy
     from agents.waves import plan_waves
-    from city.sim import FleetSim
-    from city.scenario import load_scenario
-    from coordinator.evaluate import episode_requests, initial_positions
 
     if args.threads:
         numba.set_num_threads(args.threads)
-    scen = load_scenario(args.scenario, args.data)
-    date = dt.date.fromisoformat(args.date)
-    minutes = args.warmup + args.steps + 1
-    requests = episode_requests(scen.world, date, args.hour, minutes)
-    sim = FleetSim(scen.city, requests, initial_positions(scen.city, args.taxis, args.seed))
-    for _ in range(args.warmup):
-        sim.step(greedy_controls(scen.city, sim.observe()))
+    scen, sim, episode = plan_state(args.scenario, args.data, dt.date.fromisoformat(args.date), args.hour, args.taxis,
+                                    args.seed, args.warmup, args.steps)
     name, own = parse_policy(label)
     options = {**rollout_options(args, [name]).get(name, {}), **own}
     if args.workers > 1:
         options["workers"] = args.workers
     policy = make_policy(name, scen.city, **options)
-    policy.reset(EpisodeContext(scen.city, date, args.hour, minutes, args.seed, scen.world))
+    policy.reset(episode)
     variants = {v: shortcut_variant(v) for v in args.variants}
     # One untimed call loads the compiled kernels from numba's cache (or compiles them).
     t0 = time.perf_counter()
