@@ -66,6 +66,7 @@ import numba
 import numpy as np
 
 from agents import _kernels as K
+from agents._adaptive import best_candidate, eliminate
 from agents.demand_tables import DemandTables
 from agents.greedy import greedy_controls
 from agents.ia import ia_controls
@@ -257,7 +258,9 @@ def _pickup_spots(tab: DemandTables, sectors: np.ndarray, mode: int, minute0: in
 
 def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray, serial: bool = False) -> tuple[np.ndarray, np.ndarray]:
     cfg = ctx.config
-    kernel, chunks = (K.rollout_costs_serial, 1) if serial else (K.rollout_costs, 8 * numba.get_num_threads())
+    # The threading layer starts at the first question about threads: a serial call must not ask (agents.preload).
+    threads = 1 if serial else numba.get_num_threads()
+    kernel, chunks = (K.rollout_costs_serial, 1) if threads == 1 else (K.rollout_costs, 8 * threads)
     return kernel(BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args, chunks)
 
 
@@ -327,58 +330,54 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
         ctx.stats.add(True, False, 0, 0)
         return int(inp.cands[0])
     if ctx.config.adaptive is not None:
-        # Batches are short: in the calling thread, without the start-up of a parallel region per batch.
-        return adaptive_choice(ctx, inp, serial=True)
+        return adaptive_choice(ctx, inp, serial, threads)
     if threads is None or serial:
         costs, settled = _run(ctx, inp, 0, S, np.ones(n_c, dtype=bool), serial)
     else:
-        parts = []
-        for c in range(SHARE_CHUNKS):
-            n = threads()
-            if n > 1:
-                set_kernel_threads(n)
-            parts.append(_run(ctx, inp, c * S // SHARE_CHUNKS, (c + 1) * S // SHARE_CHUNKS, np.ones(n_c, dtype=bool), serial=n == 1))
+        parts = [_run(ctx, inp, c * S // SHARE_CHUNKS, (c + 1) * S // SHARE_CHUNKS, np.ones(n_c, dtype=bool), _one_thread(threads))
+                 for c in range(SHARE_CHUNKS)]
         costs, settled = (np.concatenate(x, axis=1) for x in zip(*parts))
     shadowed = int(settled.sum())
     ctx.stats.add(False, n_c > 1 and shadowed == (n_c - 1) * S, n_c * S - shadowed, shadowed)
     return choose(inp.cands, costs)
 
 
-def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False) -> int:
+def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, threads: Callable[[], int] | None = None) -> int:
     """Successive elimination with common random numbers, deterministic for a seed.
 
     After each batch, the best candidate is the one of least total cost over
     the samples so far among those left (first in order on ties); another is
     dropped when the mean of its paired differences from the best exceeds
-    ``adaptive`` standard errors of that mean.  Stops when one is left or the
-    samples are used up, and returns the best of those left.
+    ``adaptive`` standard errors of that mean (:func:`agents._adaptive.eliminate`).
+    Stops when one is left or the samples are used up, and returns the best
+    of those left.  Each batch runs on the kernel threads, or on those
+    ``threads`` allows then, as :func:`plan_agent`'s chunks do; ``serial``
+    runs them in the calling thread.
     """
     cfg = ctx.config
     n_c = inp.cands.size
     active = np.ones(n_c, dtype=bool)
-    parts: list[np.ndarray] = []
+    costs = np.zeros((n_c, cfg.samples), dtype=np.int64)
     run = shadowed = 0
     lo = 0
     while lo < cfg.samples and active.sum() > 1:
         hi = min(cfg.samples, lo + cfg.batch)
-        costs, settled = _run(ctx, inp, lo, hi, active, serial)
+        part, settled = _run(ctx, inp, lo, hi, active, serial or (threads is not None and _one_thread(threads)))
         run += int(active.sum()) * (hi - lo) - int(settled.sum())
         shadowed += int(settled.sum())
-        parts.append(costs.astype(np.int64))
+        costs[:, lo:hi] = part
         lo = hi
-        allc = np.concatenate(parts, axis=1)
-        totals = np.where(active, allc.sum(axis=1), np.iinfo(np.int64).max)
-        best = int(np.argmin(totals))
-        diff = allc - allc[best]
-        n = allc.shape[1]
-        mean = diff.mean(axis=1)
-        se = diff.std(axis=1, ddof=1) / np.sqrt(n)
-        drop = active & (mean - cfg.adaptive * se > 0)
-        drop[best] = False
-        active &= ~drop
+        eliminate(costs, lo, active, cfg.adaptive)
     ctx.stats.add(False, False, run, shadowed)
-    totals = np.where(active, np.concatenate(parts, axis=1).sum(axis=1), np.iinfo(np.int64).max) if parts else np.zeros(n_c)
-    return int(inp.cands[int(np.argmin(totals))])
+    return int(inp.cands[best_candidate(costs, lo, active)])
+
+
+def _one_thread(threads: Callable[[], int]) -> bool:
+    """Whether the next kernel call runs in the calling thread, as ``threads`` says now (else on that many kernel threads)."""
+    n = threads()
+    if n > 1:
+        set_kernel_threads(n)
+    return n == 1
 
 
 def set_kernel_threads(n: int) -> None:

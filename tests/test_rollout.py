@@ -286,6 +286,58 @@ def test_decisions_do_not_depend_on_threads() -> None:
         np.testing.assert_array_equal(runs[0], r)
 
 
+def test_adaptive_statistics_are_numpys_to_the_last_bit() -> None:
+    """The compiled elimination round reproduces NumPy's mean and standard error exactly, so it drops what NumPy's did."""
+    from agents._adaptive import best_candidate, eliminate, paired_stats
+
+    rng = np.random.default_rng(11)
+    lengths = [2, 3, 7, 8, 9, 50, 127, 128, 129, 200, 257, 1000, 4999, 100_003]
+    for trial in range(600):
+        n = lengths[trial % len(lengths)]
+        n_c = int(rng.integers(2, 8))
+        common = rng.integers(0, 300, n + 5)
+        costs = common + rng.integers(-25, 40, (n_c, n + 5)) * (rng.random((n_c, n + 5)) < rng.random())
+        active = rng.random(n_c) < 0.8
+        active[rng.integers(n_c)] = True
+        totals = np.where(active, costs[:, :n].sum(axis=1), np.iinfo(np.int64).max)
+        best = int(np.argmin(totals))
+        assert best_candidate(costs, n, active) == best
+        diff = costs[:, :n] - costs[best, :n]
+        mean, se = paired_stats(costs, n, best)
+        np.testing.assert_array_equal(mean, diff.mean(axis=1))
+        np.testing.assert_array_equal(se, diff.std(axis=1, ddof=1) / np.sqrt(n))
+        for z in (1.0, 2.0, 3.0):
+            kept = active.copy()
+            eliminate(costs, n, kept, z)
+            drop = active & (diff.mean(axis=1) - z * diff.std(axis=1, ddof=1) / np.sqrt(n) > 0)
+            drop[best] = False
+            np.testing.assert_array_equal(kept, active & ~drop)
+
+
+def test_adaptive_decisions_do_not_depend_on_threads() -> None:
+    """Adaptive batches run on the kernel threads, in the calling thread, or as a core share allows: one choice."""
+    from agents.rollout import _plan
+
+    city = grid_city(7, 6)
+    obs = random_state(city, np.random.default_rng(6), taxis=10, requests=9)
+    ctx = context(city, obs, uniform_forecast(city, [0.6, 1.4, 0.2, 2.0]), horizon=4, samples=96, seed=2)
+    ctx = dataclasses.replace(ctx, config=dataclasses.replace(ctx.config, adaptive=1.0, batch=8))
+    shares = iter([1, 2] * 1000)  # a share that changes from batch to batch
+    runs: dict[str, list[int]] = {"kernel threads": [], "calling thread": [], "shared": []}
+    u = ctx.base_controls.copy()
+    before = numba.get_num_threads()
+    try:
+        for agent in np.flatnonzero(obs.tau == 0):
+            runs["kernel threads"].append(plan_agent(ctx, u[:agent], int(agent)))
+            runs["calling thread"].append(_plan(ctx, u[:agent], int(agent), serial=True))
+            runs["shared"].append(plan_agent(ctx, u[:agent], int(agent), threads=lambda: next(shares)))
+            u[agent] = runs["kernel threads"][-1]
+    finally:
+        numba.set_num_threads(before)
+    assert len(runs["kernel threads"]) >= 5
+    assert runs["kernel threads"] == runs["calling thread"] == runs["shared"]
+
+
 class StubWorld:
     """The demand-world interface the forecast providers read, on a small city."""
 
