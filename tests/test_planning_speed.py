@@ -149,3 +149,30 @@ def test_bench_plan_reports_variants_side_by_side(tmp_path: Path) -> None:
     assert "ms per free taxi" in proc.stdout and "same decisions" in proc.stdout
     bad = run_cli("bench", "plan", "--variants", "no-magic")
     assert bad.returncode != 0 and "unknown variant 'no-magic'" in bad.stderr
+
+
+def test_kernel_cache_is_keyed_by_every_kernel_source(tmp_path: Path) -> None:
+    """A change to any module that defines a kernel moves numba's cache; other modules do not."""
+    import subprocess
+    import sys
+
+    import agents
+    from agents import kernel_cache_dir
+
+    package = Path(agents.__file__).parent
+    for path in package.glob("*.py"):
+        (tmp_path / path.name).write_bytes(path.read_bytes())
+    first = kernel_cache_dir(tmp_path)
+    assert first.parent == tmp_path / "__pycache__"
+    (tmp_path / "waves.py").write_text((tmp_path / "waves.py").read_text() + "\n# a comment\n")
+    assert kernel_cache_dir(tmp_path) == first
+    (tmp_path / "_basesim.py").write_text((tmp_path / "_basesim.py").read_text() + "\n# a comment\n")
+    assert kernel_cache_dir(tmp_path) != first
+    # The package points numba there on import, unless the user chose a folder.
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    probe = "import agents._kernels, numba; print(numba.config.CACHE_DIR)"
+    shown = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True).stdout.strip()
+    assert shown == str(kernel_cache_dir(package))
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "mine")
+    shown = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True).stdout.strip()
+    assert shown == str(tmp_path / "mine")
