@@ -123,10 +123,13 @@ def paired_stats(costs: np.ndarray, n: int, best: int) -> tuple[np.ndarray, np.n
 
 
 @njit(cache=True)
-def eliminate(costs: np.ndarray, n: int, active: np.ndarray, z: float) -> None:
-    """Drop (in ``active``) each candidate whose mean paired difference from the best exceeds ``z`` standard errors."""
+def eliminate(costs: np.ndarray, n: int, active: np.ndarray, z: float) -> int:
+    """Drop (in ``active``) each candidate whose mean paired difference from the best exceeds ``z`` standard errors; how many are left."""
     best = best_candidate(costs, n, active)
     mean, se = paired_stats(costs, n, best)
+    left = 0
     for c in range(costs.shape[0]):
         if active[c] and c != best and mean[c] - z * se[c] > 0:
             active[c] = False
+        left += active[c]
+    return left

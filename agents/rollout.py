@@ -98,6 +98,9 @@ class StepContext:
         The minute's nearest-request lists over every outstanding request (``shortcuts.minute_lists``).
     stats : PlanStats
         What the minute's decisions cost and what the shortcuts settled.
+    arrival_spots : dict
+        Per set of sampled sectors, the nodes where an arrival within the
+        horizon can be picked up (:func:`_pickup_spots`): agents of one area share it.
     """
 
     city: City
@@ -110,6 +113,7 @@ class StepContext:
     near: np.ndarray | None = None
     near_d: np.ndarray | None = None
     stats: PlanStats = field(default_factory=PlanStats)
+    arrival_spots: dict[bytes, np.ndarray] = field(default_factory=dict, repr=False)
 
 
 def base_controls(city: City, config: RolloutConfig, obs: Observation) -> np.ndarray:
@@ -143,11 +147,15 @@ def candidate_controls(city: City, obs: Observation, agent: int) -> np.ndarray:
     return np.asarray(cands, dtype=np.int32)
 
 
-def relevant_nodes(city: City, config: RolloutConfig, here: int) -> np.ndarray:
-    """Nodes a decision at ``here`` looks at: within the pruning radius in either direction (all without pruning)."""
+def relevant_nodes(city: City, config: RolloutConfig, here: int, dist_t: np.ndarray | None = None) -> np.ndarray:
+    """Nodes a decision at ``here`` looks at: within the pruning radius in either direction (all without pruning).
+
+    ``dist_t``, ``city.dist`` transposed, when at hand, gives the distances to ``here`` as one contiguous row.
+    """
     if config.prune is None:
         return np.ones(city.n_nodes, dtype=bool)
-    return (city.dist[here] <= config.prune) | (city.dist[:, here] <= config.prune)
+    to_here = city.dist[:, here] if dist_t is None else dist_t[here]
+    return (city.dist[here] <= config.prune) | (to_here <= config.prune)
 
 
 @dataclass
@@ -179,7 +187,7 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
     req_drop = np.ascontiguousarray(obs.req_dropoff, dtype=np.int32)
     alive0, pos1, tfree1 = K.step_zero(controls, obs.pos, obs.tau, obs.dest, req_pick, req_drop, city.dist)
 
-    rel_node = relevant_nodes(city, cfg, here)
+    rel_node = relevant_nodes(city, cfg, here, transposed(city)[0] if sc.rows else None)
     if cfg.scope == "local":
         sectors = city.local_sectors(int(city.node_sector[here]))
     else:
@@ -197,7 +205,7 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
     capped = cfg.cap is not None and taxis.size > cfg.cap
     if greedy and (sc.reach or sc.skip or capped):
         # Where a pickup can happen within the horizon: tracked requests and possible arrivals.
-        spots = _pickup_spots(tab, sectors, mode, ctx.minute0, H, rel_node, req_pick[rel_req & alive0.any(axis=0)])
+        spots = _pickup_spots(ctx, sectors, mode, rel_node, req_pick[rel_req & alive0.any(axis=0)])
         if sc.skip and PICKUP not in cands:
             skip = not K.reaches(cands, np.ones(cands.size, np.int64), spots, H, city.dist).any()
         if (sc.reach or capped) and not skip:
@@ -242,17 +250,27 @@ def cap_ranking(city: City, obs: Observation, here: int, taxis: np.ndarray) -> t
     return np.lexsort((taxis, d)), d
 
 
-def _pickup_spots(tab: DemandTables, sectors: np.ndarray, mode: int, minute0: int, horizon: int,
-                  rel_node: np.ndarray, tracked_pickups: np.ndarray) -> np.ndarray:
-    """Nodes where a rollout can pick up: the tracked requests' and every possible arrival's (relevant) pickup node."""
-    eta = tab.eta[sectors]
-    if mode == K.LIMITED_CE:
-        live = sectors[eta > 0]
-    else:
-        m = minute0 + horizon
-        live = sectors[np.floor(eta * (m + 1) + 0.5) - np.floor(eta * (minute0 + 1) + 0.5) > 0]
-    parts = [tracked_pickups] + [tab.pk_node[tab.pk_ptr[q] : tab.pk_ptr[q + 1]] for q in live]
-    nodes = np.unique(np.concatenate(parts).astype(np.int32))
+def _pickup_spots(ctx: StepContext, sectors: np.ndarray, mode: int, rel_node: np.ndarray, tracked_pickups: np.ndarray) -> np.ndarray:
+    """Nodes where a rollout can pick up: the tracked requests' and every possible arrival's (relevant) pickup node.
+
+    Only whether a taxi reaches one of them matters (:func:`K.reaches`), so
+    the list may repeat a node; the arrivals' nodes are found once per minute
+    and set of sectors.
+    """
+    key = sectors.tobytes()
+    arrivals = ctx.arrival_spots.get(key)
+    if arrivals is None:
+        tab, minute0 = ctx.tables, ctx.minute0
+        eta = tab.eta[sectors]
+        if mode == K.LIMITED_CE:
+            live = sectors[eta > 0]
+        else:
+            m = minute0 + ctx.config.horizon
+            live = sectors[np.floor(eta * (m + 1) + 0.5) - np.floor(eta * (minute0 + 1) + 0.5) > 0]
+        parts = [tab.pk_node[tab.pk_ptr[q] : tab.pk_ptr[q + 1]] for q in live]
+        arrivals = np.unique(np.concatenate(parts).astype(np.int32)) if parts else np.empty(0, np.int32)
+        ctx.arrival_spots[key] = arrivals
+    nodes = np.concatenate((tracked_pickups.astype(np.int32), arrivals))
     return np.ascontiguousarray(nodes[rel_node[nodes]])
 
 
@@ -359,15 +377,16 @@ def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, thread
     active = np.ones(n_c, dtype=bool)
     costs = np.zeros((n_c, cfg.samples), dtype=np.int64)
     run = shadowed = 0
-    lo = 0
-    while lo < cfg.samples and active.sum() > 1:
+    lo, left = 0, n_c
+    while lo < cfg.samples and left > 1:
         hi = min(cfg.samples, lo + cfg.batch)
         part, settled = _run(ctx, inp, lo, hi, active, serial or (threads is not None and _one_thread(threads)))
-        run += int(active.sum()) * (hi - lo) - int(settled.sum())
-        shadowed += int(settled.sum())
+        done = int(settled.sum())
+        run += left * (hi - lo) - done
+        shadowed += done
         costs[:, lo:hi] = part
         lo = hi
-        eliminate(costs, lo, active, cfg.adaptive)
+        left = eliminate(costs, lo, active, cfg.adaptive)
     ctx.stats.add(False, False, run, shadowed)
     return int(inp.cands[best_candidate(costs, lo, active)])
 

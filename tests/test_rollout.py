@@ -308,10 +308,11 @@ def test_adaptive_statistics_are_numpys_to_the_last_bit() -> None:
         np.testing.assert_array_equal(se, diff.std(axis=1, ddof=1) / np.sqrt(n))
         for z in (1.0, 2.0, 3.0):
             kept = active.copy()
-            eliminate(costs, n, kept, z)
+            left = eliminate(costs, n, kept, z)
             drop = active & (diff.mean(axis=1) - z * diff.std(axis=1, ddof=1) / np.sqrt(n) > 0)
             drop[best] = False
             np.testing.assert_array_equal(kept, active & ~drop)
+            assert left == kept.sum()
 
 
 def test_adaptive_decisions_do_not_depend_on_threads() -> None:
