@@ -276,9 +276,7 @@ def _pickup_spots(ctx: StepContext, sectors: np.ndarray, mode: int, rel_node: np
 
 def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray, serial: bool = False) -> tuple[np.ndarray, np.ndarray]:
     cfg = ctx.config
-    # The threading layer starts at the first question about threads: a serial call must not ask (agents.preload).
-    threads = 1 if serial else numba.get_num_threads()
-    kernel, chunks = (K.rollout_costs_serial, 1) if threads == 1 else (K.rollout_costs, 8 * threads)
+    kernel, chunks = (K.rollout_costs_serial, 1) if serial else (K.rollout_costs, 8 * numba.get_num_threads())
     return kernel(BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args, chunks)
 
 
