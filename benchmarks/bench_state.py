@@ -6,6 +6,7 @@ on the path.
 import argparse
 import datetime as dt
 
+import agents.rollout as R
 from agents.base import Policy, make_policy, parse_policy
 from city.graph import City
 from city.sim import FleetSim
@@ -24,6 +25,16 @@ def state_args(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--hour", type=int, default=19)
 
 
+def replay_args(doc: str, example: str, rounds: int) -> argparse.Namespace:
+    """The command line of a script that replays captured kernel calls: the policy, the state, rounds and JSON file."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--label", required=True, help=f"policy label, e.g. {example}")
+    state_args(ap)
+    ap.add_argument("--rounds", type=int, default=rounds)
+    ap.add_argument("--json", default=None)
+    return ap.parse_args()
+
+
 def bench_state(args: argparse.Namespace, label: str) -> tuple[City, FleetSim, Policy]:
     """The city, the simulator after the greedy warm-up, and the policy ``label`` (true-rate forecast) reset for the episode."""
     scen, sim, episode = plan_state(args.scenario, args.data, DATE, args.hour, args.taxis, 0, WARMUP, args.steps)
@@ -31,3 +42,33 @@ def bench_state(args: argparse.Namespace, label: str) -> tuple[City, FleetSim, P
     policy = make_policy(name, scen.city, **{"forecast": "true-rate", **own})
     policy.reset(episode)
     return scen.city, sim, policy
+
+
+def captured_calls(args: argparse.Namespace, label: str, fill_lists: bool = False) -> list[tuple]:
+    """Every rollout-kernel call of ``args.steps`` minutes of ``label`` at the state, as ``agents.rollout._run``'s arguments.
+
+    The policy plans one untimed minute first (loading the compiled kernels).
+    With ``fill_lists`` each call's nearest-request lists are filled before it
+    runs, so that replays with any kernel read the same lists.
+    """
+    import agents._kernels as K
+
+    _, sim, policy = bench_state(args, label)
+    policy.act(sim.observe())
+    calls = []
+    run = R._run
+
+    def capture(ctx, inp, lo, hi, active, serial=False):  # noqa: ANN001, ANN202
+        if fill_lists:
+            a = inp.args
+            K.fill_lists(a[8], a[9], a[6], a[21])
+        calls.append((ctx, inp, lo, hi, active.copy(), serial))
+        return run(ctx, inp, lo, hi, active, serial)
+
+    R._run = capture
+    try:
+        for _ in range(args.steps):
+            sim.step(policy.act(sim.observe()))
+    finally:
+        R._run = run
+    return calls

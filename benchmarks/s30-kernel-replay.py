@@ -12,43 +12,23 @@ preparation of each decision is not in it.
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 
 import numpy as np
 
 import agents.rollout as R
-from bench_state import bench_state, state_args
+from bench_state import captured_calls, replay_args
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--label", required=True, help="policy label, e.g. surge:adaptive=2,batch=50,cap=24")
-    state_args(ap)
-    ap.add_argument("--rounds", type=int, default=9)
-    ap.add_argument("--json", default=None)
-    args = ap.parse_args()
-    _, sim, policy = bench_state(args, args.label)
-    policy.act(sim.observe())  # loads the compiled kernels
-    calls = []
-    run = R._run
-
-    def capture(ctx, inp, lo, hi, active, serial=False):  # noqa: ANN001, ANN202
-        calls.append((ctx, inp, lo, hi, active.copy(), serial))
-        return run(ctx, inp, lo, hi, active, serial)
-
-    R._run = capture
-    try:
-        for _ in range(args.steps):
-            sim.step(policy.act(sim.observe()))
-    finally:
-        R._run = run
+    args = replay_args(__doc__, "surge:adaptive=2,batch=50,cap=24", 9)
+    calls = captured_calls(args, args.label)
     totals = []
     for _ in range(args.rounds):
         t0 = time.perf_counter()
         for call in calls:
-            run(*call)
+            R._run(*call)
         totals.append(time.perf_counter() - t0)
     out = {"label": args.label, "scenario": args.scenario, "taxis": args.taxis, "hour": args.hour, "steps": args.steps,
            "kernel_calls": len(calls), "rounds": args.rounds, "kernel_seconds_min": min(totals),

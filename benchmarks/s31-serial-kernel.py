@@ -16,7 +16,6 @@ of ``--rounds`` totals kept, four ways:
 
 from __future__ import annotations
 
-import argparse
 import json
 import threading
 import time
@@ -26,39 +25,18 @@ import numpy as np
 
 import agents._kernels as K
 import agents.rollout as R
-from bench_state import bench_state, state_args
+from bench_state import captured_calls, replay_args
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--label", required=True, help="policy label, e.g. garces2023:samples=100")
-    state_args(ap)
-    ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--json", default=None)
-    args = ap.parse_args()
-    _, sim, policy = bench_state(args, args.label)
-    policy.act(sim.observe())
-    calls = []
-    run = R._run
-
-    def capture(ctx, inp, lo, hi, active, serial=False):  # noqa: ANN001, ANN202
-        a = inp.args
-        K.fill_lists(a[8], a[9], a[6], a[21])
-        calls.append((ctx, inp, lo, hi, active.copy()))
-        return run(ctx, inp, lo, hi, active, serial)
-
-    R._run = capture
-    try:
-        for _ in range(args.steps):
-            sim.step(policy.act(sim.observe()))
-    finally:
-        R._run = run
+    args = replay_args(__doc__, "garces2023:samples=100", 5)
+    calls = captured_calls(args, args.label, fill_lists=True)
     parallel_nogil = numba.njit(parallel=True, nogil=True)(K.rollout_costs.py_func)
 
     def replay(kernel, part, one_thread: bool) -> None:  # noqa: ANN001
         if one_thread:
             numba.set_num_threads(1)
-        for ctx, inp, lo, hi, active in part:
+        for ctx, inp, lo, hi, active, _ in part:
             cfg = ctx.config
             kernel(R.BASES[cfg.base], cfg.horizon, lo, hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args, 8)
 
