@@ -329,9 +329,10 @@ def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Cal
     on the way (:func:`adaptive_choice`); otherwise the choice is
     :func:`choose` over every sample, whatever exact shortcuts are on.
     ``threads``, when given, is asked before each of :data:`SHARE_CHUNKS`
-    chunks of samples how many kernel threads to run it on (one: in the
-    calling thread, without a parallel region; :class:`agents.cores.CoreShare`,
-    :meth:`agents.rollout_policy.RolloutPolicy._act_waves`); the control does not depend on it.
+    chunks of samples (or each adaptive batch) how many kernel threads to run
+    it on (one: in the calling thread, without a parallel region;
+    :class:`agents.cores.CoreShare`, :meth:`agents.rollout_policy.RolloutPolicy._act_waves`);
+    the control does not depend on it.
     """
     return _plan(ctx, committed, agent, serial=False, threads=threads)
 
