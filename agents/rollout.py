@@ -150,7 +150,8 @@ def candidate_controls(city: City, obs: Observation, agent: int) -> np.ndarray:
 def relevant_nodes(city: City, config: RolloutConfig, here: int, dist_t: np.ndarray | None = None) -> np.ndarray:
     """Nodes a decision at ``here`` looks at: within the pruning radius in either direction (all without pruning).
 
-    ``dist_t``, ``city.dist`` transposed, when at hand, gives the distances to ``here`` as one contiguous row.
+    ``dist_t``, ``city.dist`` transposed, when at hand, gives the distances to ``here`` as one row
+    (contiguous when it is :func:`transposed`'s copy).
     """
     if config.prune is None:
         return np.ones(city.n_nodes, dtype=bool)
@@ -187,7 +188,8 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
     req_drop = np.ascontiguousarray(obs.req_dropoff, dtype=np.int32)
     alive0, pos1, tfree1 = K.step_zero(controls, obs.pos, obs.tau, obs.dest, req_pick, req_drop, city.dist)
 
-    rel_node = relevant_nodes(city, cfg, here, transposed(city)[0] if sc.rows else None)
+    dist_t, hop_t = transposed(city) if sc.rows else (city.dist.T, city.next_hop.T)
+    rel_node = relevant_nodes(city, cfg, here, dist_t)
     if cfg.scope == "local":
         sectors = city.local_sectors(int(city.node_sector[here]))
     else:
@@ -205,7 +207,7 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
     capped = cfg.cap is not None and taxis.size > cfg.cap
     if greedy and (sc.reach or sc.skip or capped):
         # Where a pickup can happen within the horizon: tracked requests and possible arrivals.
-        spots = _pickup_spots(ctx, sectors, mode, rel_node, req_pick[rel_req & alive0.any(axis=0)])
+        spots = _pickup_spots(ctx, sectors, rel_node, req_pick[rel_req & alive0.any(axis=0)])
         if sc.skip and PICKUP not in cands:
             skip = not K.reaches(cands, np.ones(cands.size, np.int64), spots, H, city.dist).any()
         if (sc.reach or capped) and not skip:
@@ -237,8 +239,7 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
         a0, np.ascontiguousarray(pos1[:, taxis]), np.ascontiguousarray(tfree1[:, taxis]),
         e_pick, e_drop, near, near_d, rel_node,
         sectors.astype(np.int64), tab.eta, tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum,
-        tab.beta_cum, _max_arrivals(tab.eta[sectors], mode, ctx.minute0, H), city.dist,
-        *(transposed(city) if sc.rows else (city.dist.T, city.next_hop.T)),
+        tab.beta_cum, _max_arrivals(tab.eta[sectors], mode, ctx.minute0, H), city.dist, dist_t, hop_t,
     )
     shadow = (cands != PICKUP) & (sc.shadow and greedy)
     return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow))
@@ -250,7 +251,7 @@ def cap_ranking(city: City, obs: Observation, here: int, taxis: np.ndarray) -> t
     return np.lexsort((taxis, d)), d
 
 
-def _pickup_spots(ctx: StepContext, sectors: np.ndarray, mode: int, rel_node: np.ndarray, tracked_pickups: np.ndarray) -> np.ndarray:
+def _pickup_spots(ctx: StepContext, sectors: np.ndarray, rel_node: np.ndarray, tracked_pickups: np.ndarray) -> np.ndarray:
     """Nodes where a rollout can pick up: the tracked requests' and every possible arrival's (relevant) pickup node.
 
     Only whether a taxi reaches one of them matters (:func:`K.reaches`), so
@@ -262,7 +263,7 @@ def _pickup_spots(ctx: StepContext, sectors: np.ndarray, mode: int, rel_node: np
     if arrivals is None:
         tab, minute0 = ctx.tables, ctx.minute0
         eta = tab.eta[sectors]
-        if mode == K.LIMITED_CE:
+        if CE_MODES[ctx.config.ce] == K.LIMITED_CE:
             live = sectors[eta > 0]
         else:
             m = minute0 + ctx.config.horizon
@@ -351,7 +352,7 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
     if threads is None or serial:
         costs, settled = _run(ctx, inp, 0, S, np.ones(n_c, dtype=bool), serial)
     else:
-        parts = [_run(ctx, inp, c * S // SHARE_CHUNKS, (c + 1) * S // SHARE_CHUNKS, np.ones(n_c, dtype=bool), _one_thread(threads))
+        parts = [_run(ctx, inp, c * S // SHARE_CHUNKS, (c + 1) * S // SHARE_CHUNKS, np.ones(n_c, dtype=bool), _serial_now(False, threads))
                  for c in range(SHARE_CHUNKS)]
         costs, settled = (np.concatenate(x, axis=1) for x in zip(*parts))
     shadowed = int(settled.sum())
@@ -379,7 +380,7 @@ def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, thread
     lo, left = 0, n_c
     while lo < cfg.samples and left > 1:
         hi = min(cfg.samples, lo + cfg.batch)
-        part, settled = _run(ctx, inp, lo, hi, active, serial or (threads is not None and _one_thread(threads)))
+        part, settled = _run(ctx, inp, lo, hi, active, _serial_now(serial, threads))
         done = int(settled.sum())
         run += left * (hi - lo) - done
         shadowed += done
@@ -390,8 +391,10 @@ def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, thread
     return int(inp.cands[best_candidate(costs, lo, active)])
 
 
-def _one_thread(threads: Callable[[], int]) -> bool:
-    """Whether the next kernel call runs in the calling thread, as ``threads`` says now (else on that many kernel threads)."""
+def _serial_now(serial: bool, threads: Callable[[], int] | None) -> bool:
+    """Whether the next kernel call runs in the calling thread: if ``serial``, or if ``threads`` now allows one (else it runs on as many as allowed)."""
+    if serial or threads is None:
+        return serial
     n = threads()
     if n > 1:
         set_kernel_threads(n)
