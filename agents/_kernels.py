@@ -309,7 +309,7 @@ def _run_samples(
                 )
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def rollout_costs(
     base: int,
     horizon: int,
@@ -360,7 +360,9 @@ def rollout_costs(
     for the agent alone (taxi ``ag``, see :func:`_shadow_greedy`); the second
     result flags the (candidate, sample) costs settled that way.  With the
     greedy base and ``share``, taxis searching from the same node in the same
-    step share one search (:func:`_simulate_greedy`).
+    step share one search (:func:`_simulate_greedy`).  It releases the GIL:
+    agents planning side by side in threads each run a region of their own
+    (:func:`agents.rollout._one_thread_regions`).
     """
     n_samples = s_hi - s_lo
     out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)

@@ -331,7 +331,7 @@ def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Cal
     :func:`choose` over every sample, whatever exact shortcuts are on.
     ``threads``, when given, is asked before each of :data:`SHARE_CHUNKS`
     chunks of samples (or each adaptive batch) how many kernel threads to run
-    it on (one: in the calling thread, without a parallel region;
+    it on (one: in the calling thread, :func:`_serial_now`;
     :class:`agents.cores.CoreShare`, :meth:`agents.rollout_policy.RolloutPolicy._act_waves`);
     the control does not depend on it.
     """
@@ -392,13 +392,35 @@ def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, thread
 
 
 def _serial_now(serial: bool, threads: Callable[[], int] | None) -> bool:
-    """Whether the next kernel call runs in the calling thread: if ``serial``, or if ``threads`` now allows one (else it runs on as many as allowed)."""
+    """Whether the next kernel call runs the serial kernel: if ``serial``, or if ``threads`` now allows one (else it runs on as many as allowed).
+
+    A one-thread share runs the parallel kernel on one thread instead where
+    :func:`_one_thread_regions` allows it.
+    """
     if serial or threads is None:
         return serial
     n = threads()
-    if n > 1:
-        set_kernel_threads(n)
-    return n == 1
+    if n == 1 and not _one_thread_regions():
+        return True
+    set_kernel_threads(n)
+    return False
+
+
+def _one_thread_regions() -> bool:
+    """Whether this process already runs parallel regions, from any thread at once: then a one-thread share runs one.
+
+    The parallel kernel on one thread computes faster than the serial kernel
+    (numba compiles the same loop body better inside a parallel region;
+    BENCHMARKS "Session 32"), and it releases the GIL too.  Regions from
+    several threads at once need a thread-safe threading layer (OpenMP or
+    TBB, not workqueue).  A process that has not started one keeps the
+    serial kernel, so that agents that only ever plan on one core (a fleet's
+    agent processes, :mod:`agents.preload`) never load the parallel kernel.
+    """
+    try:
+        return numba.threading_layer() in ("omp", "tbb")
+    except ValueError:
+        return False
 
 
 def set_kernel_threads(n: int) -> None:

@@ -177,10 +177,11 @@ class RolloutPolicy(Policy):
         threads: an agent's costs depend only on its ``depends``, so it plans
         with the controls committed so far and the result is that of strictly
         sequential turns.  An agent planning alone runs its samples on every
-        kernel thread; while others plan too, each runs its chunks in its own
-        thread (the kernel releases the GIL), so the cores do not idle and the
-        kernel spends nothing on parallel regions.  Only one agent at a time
-        ever runs a parallel region, whatever numba's threading layer.
+        kernel thread; while others plan too, each runs its chunks on one
+        thread of its own (the kernel releases the GIL), so the cores do not
+        idle.  That one thread is a one-thread parallel region where the
+        threading layer allows several at once (OpenMP, TBB), and the serial
+        kernel otherwise (:func:`agents.rollout._one_thread_regions`).
 
         Threads, not processes: the agents share the city and the minute's
         context, and only the short Python preparation of each decision is
