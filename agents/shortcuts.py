@@ -41,8 +41,9 @@ class Shortcuts:
     lazy_lists : bool
         A decision's nearest-request lists are made for the nodes its taxis
         search from, when they first do, instead of for every node of the map
-        beforehand.  Serial rollouts only (the adaptive batches, a lone
-        thread's share of the cores); the parallel kernel gets them whole.
+        beforehand.  Serial rollouts only (:func:`agents.rollout._serial_now`);
+        the parallel kernel gets them whole, also on one thread (measured
+        slower lazily there for the ``ia`` base, BENCHMARKS "Session 32").
     """
 
     skip: bool = True
