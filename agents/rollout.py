@@ -331,7 +331,7 @@ def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Cal
     :func:`choose` over every sample, whatever exact shortcuts are on.
     ``threads``, when given, is asked before each of :data:`SHARE_CHUNKS`
     chunks of samples (or each adaptive batch) how many kernel threads to run
-    it on (one: in the calling thread, :func:`_serial_now`;
+    it on (one: on the calling thread alone, :func:`_serial_now`;
     :class:`agents.cores.CoreShare`, :meth:`agents.rollout_policy.RolloutPolicy._act_waves`);
     the control does not depend on it.
     """
@@ -407,7 +407,7 @@ def _serial_now(serial: bool, threads: Callable[[], int] | None) -> bool:
 
 
 def _one_thread_regions() -> bool:
-    """Whether this process already runs parallel regions, from any thread at once: then a one-thread share runs one.
+    """Whether a one-thread share runs a one-thread parallel region: where this process already runs regions, under a layer that takes them from several threads at once.
 
     The parallel kernel on one thread computes faster than the serial kernel
     (numba compiles the same loop body better inside a parallel region;
