@@ -42,8 +42,7 @@ class Shortcuts:
         A decision's nearest-request lists are made for the nodes its taxis
         search from, when they first do, instead of for every node of the map
         beforehand.  Serial rollouts only (:func:`agents.rollout._serial_now`);
-        the parallel kernel gets them whole, also on one thread (measured
-        slower lazily there for the ``ia`` base, BENCHMARKS "Session 32").
+        the parallel kernel gets them whole, also on one thread.
     """
 
     skip: bool = True
