@@ -277,12 +277,8 @@ def _pickup_spots(ctx: StepContext, sectors: np.ndarray, rel_node: np.ndarray, t
 
 def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray, serial: bool = False) -> tuple[np.ndarray, np.ndarray]:
     cfg = ctx.config
-    args = (BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args)
-    if serial:
-        return K.rollout_costs_serial(*args, 1)
-    threads = numba.get_num_threads()
-    # On one thread no row is read while it is listed: rows are listed as taxis first search from them.
-    return K.rollout_costs(*args, 8 * threads, threads > 1)
+    kernel, chunks = (K.rollout_costs_serial, 1) if serial else (K.rollout_costs, 8 * numba.get_num_threads())
+    return kernel(BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args, chunks)
 
 
 def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np.ndarray, np.ndarray]:

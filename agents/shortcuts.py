@@ -41,9 +41,8 @@ class Shortcuts:
     lazy_lists : bool
         A decision's nearest-request lists are made for the nodes its taxis
         search from, when they first do, instead of for every node of the map
-        beforehand.  Rollouts on one thread only (the serial kernel, or the
-        parallel kernel on one thread); on more, the parallel kernel lists
-        every row first.
+        beforehand.  Serial rollouts only (:func:`agents.rollout._serial_now`);
+        the parallel kernel gets them whole, also on one thread.
     """
 
     skip: bool = True
