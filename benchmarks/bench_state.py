@@ -5,6 +5,10 @@ on the path.
 """
 import argparse
 import datetime as dt
+import time
+from collections.abc import Callable
+
+import numba
 
 import agents.rollout as R
 from agents.base import Policy, make_policy, parse_policy
@@ -72,3 +76,16 @@ def captured_calls(args: argparse.Namespace, label: str, fill_lists: bool = Fals
     finally:
         R._run = run
     return calls
+
+
+def replay(calls: list[tuple], kernel, chunks: Callable[[int], int] | None = None) -> float:  # noqa: ANN001
+    """Seconds to run captured ``calls`` again with ``kernel`` (either rollout kernel).
+
+    ``chunks`` gives a call's chunk count from its number of samples; by
+    default 8 per kernel thread, as ``agents.rollout._run`` runs the parallel kernel.
+    """
+    t0 = time.perf_counter()
+    for ctx, inp, lo, hi, active, _ in calls:
+        n = chunks(hi - lo) if chunks else 8 * numba.get_num_threads()
+        kernel(*R.kernel_args(ctx, inp, lo, hi, active), n)
+    return time.perf_counter() - t0

@@ -8,8 +8,9 @@ of ``--rounds`` totals kept, four ways:
 - ``serial``: :func:`agents._kernels.rollout_costs_serial`, what an agent planning beside another runs;
 - ``parallel, 1 thread``: :func:`agents._kernels.rollout_costs` on one kernel thread;
 - ``serial, 2 Python threads``: the calls split between two threads, as two agents of ``workers=2`` run them;
-- ``parallel nogil, 1 thread each, 2 Python threads``: the same with a copy of the parallel kernel compiled
-  here with ``nogil=True``, each thread on one kernel thread (numba's thread count is per thread).
+- ``parallel nogil, 1 thread each, 2 Python threads``: the same with the parallel kernel, each thread on one
+  kernel thread (numba's thread count is per thread).  Session 31 compiled a ``nogil=True`` copy of it here;
+  since 16a209b the kernel itself releases the GIL.
 
     PYTHONPATH=. python benchmarks/s31-serial-kernel.py --scenario synthetic --label garces2023:samples=100
 """
@@ -24,29 +25,23 @@ import numba
 import numpy as np
 
 import agents._kernels as K
-import agents.rollout as R
-from bench_state import captured_calls, replay_args
+from bench_state import captured_calls, replay, replay_args
 
 
 def main() -> None:
     args = replay_args(__doc__, "garces2023:samples=100", 5)
     calls = captured_calls(args, args.label, fill_lists=True)
-    parallel_nogil = numba.njit(parallel=True, nogil=True)(K.rollout_costs.py_func)
 
-    def replay(kernel, part, one_thread: bool) -> None:  # noqa: ANN001
+    def run(kernel, part, one_thread: bool) -> float:  # noqa: ANN001
         if one_thread:
             numba.set_num_threads(1)
-        for ctx, inp, lo, hi, active, _ in part:
-            cfg = ctx.config
-            kernel(R.BASES[cfg.base], cfg.horizon, lo, hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args, 8)
+        return replay(part, kernel, lambda n: 8)
 
     def alone(kernel, one_thread: bool) -> float:  # noqa: ANN001
-        t0 = time.perf_counter()
-        replay(kernel, calls, one_thread)
-        return time.perf_counter() - t0
+        return run(kernel, calls, one_thread)
 
     def side_by_side(kernel, one_thread: bool) -> float:  # noqa: ANN001
-        threads = [threading.Thread(target=replay, args=(kernel, calls[k::2], one_thread)) for k in (0, 1)]
+        threads = [threading.Thread(target=run, args=(kernel, calls[k::2], one_thread)) for k in (0, 1)]
         t0 = time.perf_counter()
         for t in threads:
             t.start()
@@ -58,9 +53,8 @@ def main() -> None:
         "serial": lambda: alone(K.rollout_costs_serial, False),
         "parallel, 1 thread": lambda: alone(K.rollout_costs, True),
         "serial, 2 Python threads": lambda: side_by_side(K.rollout_costs_serial, False),
-        "parallel nogil, 1 thread each, 2 Python threads": lambda: side_by_side(parallel_nogil, True),
+        "parallel nogil, 1 thread each, 2 Python threads": lambda: side_by_side(K.rollout_costs, True),
     }
-    replay(parallel_nogil, calls[:2], True)  # compiles the copy
     before = numba.get_num_threads()
     seconds: dict[str, list[float]] = {w: [] for w in ways}
     try:

@@ -13,13 +13,11 @@ replays of each.  The costs do not depend on the chunks.
 from __future__ import annotations
 
 import json
-import time
 
 import numba
 
 import agents._kernels as K
-import agents.rollout as R
-from bench_state import captured_calls, replay_args
+from bench_state import captured_calls, replay, replay_args
 
 
 def main() -> None:
@@ -29,18 +27,10 @@ def main() -> None:
     ways = {"16 (8 per thread)": lambda n: 8 * T, "2": lambda n: T, "4": lambda n: 2 * T,
             "1 per 25 samples": lambda n: max(T, min(8 * T, n // 25))}
 
-    def replay(chunks) -> float:  # noqa: ANN001
-        t0 = time.perf_counter()
-        for ctx, inp, lo, hi, active, _ in calls:
-            cfg = ctx.config
-            K.rollout_costs(R.BASES[cfg.base], cfg.horizon, lo, hi, active, inp.shadow, ctx.shortcuts.share, inp.ag,
-                            *inp.args, chunks(hi - lo))
-        return time.perf_counter() - t0
-
     seconds: dict[str, list[float]] = {w: [] for w in ways}
     for _ in range(args.rounds):
         for name, chunks in ways.items():
-            seconds[name].append(replay(chunks))
+            seconds[name].append(replay(calls, K.rollout_costs, chunks))
     least = {w: min(s) for w, s in seconds.items()}
     print(f"{args.label}: {len(calls)} kernel calls, least of {args.rounds} replays: "
           + ", ".join(f"{w} chunks {s:.4f} s" for w, s in least.items()))

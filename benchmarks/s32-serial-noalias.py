@@ -27,32 +27,24 @@ if NOALIAS:
     Flags.options["noalias"]._default = True
 
 import json  # noqa: E402
-import time  # noqa: E402
 
 import numba  # noqa: E402
 
 import agents._kernels as K  # noqa: E402
-import agents.rollout as R  # noqa: E402
-from bench_state import captured_calls, replay_args  # noqa: E402
+from bench_state import captured_calls, replay, replay_args  # noqa: E402
 
 
 def main() -> None:
     args = replay_args(__doc__, "surge", 5)
     calls = captured_calls(args, args.label, fill_lists=True)
 
-    def replay(kernel) -> float:  # noqa: ANN001
-        t0 = time.perf_counter()
-        for ctx, inp, lo, hi, active, _ in calls:
-            cfg = ctx.config
-            kernel(R.BASES[cfg.base], cfg.horizon, lo, hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args, 8)
-        return time.perf_counter() - t0
-
-    replay(K.rollout_costs_serial)
+    eight = lambda n: 8  # noqa: E731
+    replay(calls, K.rollout_costs_serial, eight)
     numba.set_num_threads(1)
     seconds: dict[str, list[float]] = {"serial": [], "parallel, 1 thread": []}
     for _ in range(args.rounds):
-        seconds["serial"].append(replay(K.rollout_costs_serial))
-        seconds["parallel, 1 thread"].append(replay(K.rollout_costs))
+        seconds["serial"].append(replay(calls, K.rollout_costs_serial, eight))
+        seconds["parallel, 1 thread"].append(replay(calls, K.rollout_costs, eight))
     least = {k: min(v) for k, v in seconds.items()}
     print(f"{args.label}, noalias {'on' if NOALIAS else 'off'}: least of {args.rounds} replays: "
           + ", ".join(f"{k} {v:.3f} s" for k, v in least.items()))
