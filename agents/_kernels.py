@@ -362,7 +362,7 @@ def rollout_costs(
     greedy base and ``share``, taxis searching from the same node in the same
     step share one search (:func:`_simulate_greedy`).  It releases the GIL:
     agents planning side by side in threads each run a region of their own
-    (:func:`agents.rollout._one_thread_regions`).
+    (:func:`agents.rollout._serial_now`).
     """
     n_samples = s_hi - s_lo
     out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)

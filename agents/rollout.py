@@ -327,7 +327,8 @@ def choose(cands: np.ndarray, costs: np.ndarray) -> int:
 SHARE_CHUNKS = 4
 
 
-def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Callable[[], int] | None = None) -> int:
+def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Callable[[], int] | None = None,
+               regions: bool = False) -> int:
     """One agent's rollout control: a pure function of the context, ``committed`` and ``agent``.
 
     A busy agent gets its forced next hop without planning.  With
@@ -338,12 +339,14 @@ def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Cal
     chunks of samples (or each adaptive batch) how many kernel threads to run
     it on (one: on the calling thread alone, :func:`_serial_now`;
     :class:`agents.cores.CoreShare`, :meth:`agents.rollout_policy.RolloutPolicy._act_waves`);
-    the control does not depend on it.
+    the control does not depend on it.  With ``regions``, a one-thread share
+    may run a one-thread parallel region instead (:func:`_serial_now`).
     """
-    return _plan(ctx, committed, agent, serial=False, threads=threads)
+    return _plan(ctx, committed, agent, serial=False, threads=threads, regions=regions)
 
 
-def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, threads: Callable[[], int] | None = None) -> int:
+def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, threads: Callable[[], int] | None = None,
+          regions: bool = False) -> int:
     """:func:`plan_agent`; ``serial`` runs the samples in the calling thread without the GIL (same result)."""
     if ctx.obs.tau[agent] > 0:
         return int(ctx.base_controls[agent])
@@ -353,11 +356,11 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
         ctx.stats.add(True, False, 0, 0)
         return int(inp.cands[0])
     if ctx.config.adaptive is not None:
-        return adaptive_choice(ctx, inp, serial, threads)
+        return adaptive_choice(ctx, inp, serial, threads, regions)
     if threads is None or serial:
         costs, settled = _run(ctx, inp, 0, S, np.ones(n_c, dtype=bool), serial)
     else:
-        parts = [_run(ctx, inp, c * S // SHARE_CHUNKS, (c + 1) * S // SHARE_CHUNKS, np.ones(n_c, dtype=bool), _serial_now(False, threads))
+        parts = [_run(ctx, inp, c * S // SHARE_CHUNKS, (c + 1) * S // SHARE_CHUNKS, np.ones(n_c, dtype=bool), _serial_now(False, threads, regions))
                  for c in range(SHARE_CHUNKS)]
         costs, settled = (np.concatenate(x, axis=1) for x in zip(*parts))
     shadowed = int(settled.sum())
@@ -365,7 +368,8 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
     return choose(inp.cands, costs)
 
 
-def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, threads: Callable[[], int] | None = None) -> int:
+def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, threads: Callable[[], int] | None = None,
+                    regions: bool = False) -> int:
     """Successive elimination with common random numbers, deterministic for a seed.
 
     After each batch, the best candidate is the one of least total cost over
@@ -385,7 +389,7 @@ def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, thread
     lo, left = 0, n_c
     while lo < cfg.samples and left > 1:
         hi = min(cfg.samples, lo + cfg.batch)
-        part, settled = _run(ctx, inp, lo, hi, active, _serial_now(serial, threads))
+        part, settled = _run(ctx, inp, lo, hi, active, _serial_now(serial, threads, regions))
         done = int(settled.sum())
         run += left * (hi - lo) - done
         shadowed += done
@@ -396,32 +400,29 @@ def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, thread
     return int(inp.cands[best_candidate(costs, lo, active)])
 
 
-def _serial_now(serial: bool, threads: Callable[[], int] | None) -> bool:
+def _serial_now(serial: bool, threads: Callable[[], int] | None, regions: bool = False) -> bool:
     """Whether the next kernel call runs the serial kernel: if ``serial``, or if ``threads`` now allows one (else it runs on as many as allowed).
 
-    A one-thread share runs the parallel kernel on one thread instead where
-    :func:`_one_thread_regions` allows it.
+    With ``regions`` a one-thread share runs the parallel kernel on one thread
+    instead, where :func:`_threadsafe_regions` allows it.  The parallel kernel
+    on one thread computes faster than the serial kernel (numba compiles the
+    same loop body better inside a parallel region; BENCHMARKS "Session 32").
+    Only the in-process policy's agents ask for it
+    (:meth:`agents.rollout_policy.RolloutPolicy._act_waves`); a fleet's agent
+    processes keep the serial kernel their fork server preloads
+    (:mod:`agents.preload`).
     """
     if serial or threads is None:
         return serial
     n = threads()
-    if n == 1 and not _one_thread_regions():
+    if n == 1 and not (regions and _threadsafe_regions()):
         return True
     set_kernel_threads(n)
     return False
 
 
-def _one_thread_regions() -> bool:
-    """Whether a one-thread share runs a one-thread parallel region: where this process already runs regions, under a layer that takes them from several threads at once.
-
-    The parallel kernel on one thread computes faster than the serial kernel
-    (numba compiles the same loop body better inside a parallel region;
-    BENCHMARKS "Session 32"), and it releases the GIL too.  Regions from
-    several threads at once need a thread-safe threading layer (OpenMP or
-    TBB, not workqueue).  A process that has not started one keeps the
-    serial kernel, so that agents that only ever plan on one core (a fleet's
-    agent processes, :mod:`agents.preload`) never load the parallel kernel.
-    """
+def _threadsafe_regions() -> bool:
+    """Whether this process runs parallel regions under a layer that takes them from several threads at once (OpenMP, TBB; not workqueue)."""
     try:
         return numba.threading_layer() in ("omp", "tbb")
     except ValueError:

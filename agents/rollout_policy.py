@@ -181,7 +181,7 @@ class RolloutPolicy(Policy):
         thread of its own (the kernel releases the GIL), so the cores do not
         idle.  That one thread is a one-thread parallel region where the
         threading layer allows several at once (OpenMP, TBB), and the serial
-        kernel otherwise (:func:`agents.rollout._one_thread_regions`).
+        kernel otherwise (:func:`agents.rollout._serial_now`).
 
         Threads, not processes: the agents share the city and the minute's
         context, and only the short Python preparation of each decision is
@@ -202,7 +202,7 @@ class RolloutPolicy(Policy):
             with lock:
                 running[0] += 1
             try:
-                return plan_agent(ctx, seen, agent, threads=share)
+                return plan_agent(ctx, seen, agent, threads=share, regions=True)
             finally:
                 with lock:
                     running[0] -= 1

@@ -315,15 +315,16 @@ def test_adaptive_statistics_are_numpys_to_the_last_bit() -> None:
             assert left == kept.sum()
 
 
-def test_a_one_thread_share_runs_a_one_thread_region_once_the_process_runs_regions() -> None:
-    """Where the threading layer takes regions from several threads at once, a share of one runs the parallel kernel on one thread."""
-    from agents.rollout import _one_thread_regions, _serial_now
+def test_a_one_thread_share_runs_a_one_thread_region_where_asked_and_the_layer_allows() -> None:
+    """In-process agents side by side (``regions``) run the parallel kernel on one thread under OpenMP or TBB; others the serial kernel."""
+    from agents.rollout import _serial_now, _threadsafe_regions
 
     before = numba.get_num_threads()  # starts the threading layer
     try:
         threadsafe = numba.threading_layer() in ("omp", "tbb")
-        assert _one_thread_regions() == threadsafe
-        assert _serial_now(False, lambda: 1) == (not threadsafe)
+        assert _threadsafe_regions() == threadsafe
+        assert _serial_now(False, lambda: 1)  # a fleet's agent process: the serial kernel
+        assert _serial_now(False, lambda: 1, regions=True) == (not threadsafe)
         assert numba.get_num_threads() == (1 if threadsafe else before)
         assert _serial_now(True, lambda: 2) and not _serial_now(False, lambda: 2)
         assert numba.get_num_threads() == min(2, numba.config.NUMBA_NUM_THREADS)
