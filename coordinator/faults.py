@@ -70,6 +70,15 @@ class Health:
             self.suspect.discard(agent)
             self.log(f"agent {agent} acknowledged minute {t}; its turns are waited for again")
 
+    def lost_since(self, agent: int, when: float) -> bool:
+        """Whether agent ``agent``'s token is gone, or went and came back, since ``when`` (monotonic seconds).
+
+        A turn sent before such a departure went with the process that left: a
+        process that came back in its place subscribed after it, and would
+        only let the turn's deadline pass.
+        """
+        return agent not in self.alive or self.departed.get(agent, float("-inf")) >= when
+
     def missed(self, agents: set[int], t: int, deadline_s: float) -> None:
         """``agents`` let the deadline of minute ``t`` pass: suspect, in one log line however many."""
         self.suspect |= agents

@@ -438,7 +438,8 @@ class Coordinator:
         go out again once the agents are back; they also go out again every
         :data:`~coordinator.faults.RESEND_S` seconds, and an agent answers a
         turn it has planned with the control it sent.  An agent that is gone,
-        suspect or past its deadline gets the base control.
+        that left since its turn went out (a process back in its place never
+        got the turn), suspect or past its deadline gets the base control.
 
         Returns the minute's waves for the report: each wave's agents, their
         planning seconds, and the seconds by which the wave's last commit
@@ -501,9 +502,9 @@ class Coordinator:
                     else:
                         self.waiting.add(a)
                         sent[a], deadline[a] = now, now + self.cfg.deadline_s
-            elif not self.waiting <= health.alive:
+            elif any(health.lost_since(a, sent[a]) for a in self.waiting):
                 healed = self._partition(inbox, t)
-                gone = self.waiting - health.alive
+                gone = self.waiting - health.alive if healed else {a for a in self.waiting if health.lost_since(a, sent[a])}
                 if gone:
                     log(f"minute {t}: {agents_text(gone)} gone; base control used")
                     for a in sorted(gone):

@@ -277,6 +277,44 @@ def test_a_killed_agent_rejoins_and_a_hung_agent_costs_one_deadline(bus: Bus, tm
     assert len(result["controls"]) == minutes
 
 
+def test_an_agent_back_before_its_departure_settles_gets_the_base_control_at_once(bus: Bus) -> None:
+    """Agent 1 is stopped with a turn outstanding, then killed while the coordinator is stopped too, and a process
+    declares its token at once: the coordinator sees it leave and come back in one burst.  The turn went with the
+    process that left, so it is the base control now, not a wait for the deadline (the race a fast restart hit)."""
+    from bus.keys import Keys
+    from bus.session import SessionArgs, open_session
+    from bus.wire import Control, Turn, decode
+
+    run, keys = "back", Keys("back")
+    coord = _coordinator(bus, run, minutes=60, deadline=60, minute_s=0.4)
+    agents = [bus.agent(i, run, grace=60) for i in range(3)]
+    turns: queue.SimpleQueue = queue.SimpleQueue()
+    committed: queue.SimpleQueue = queue.SimpleQueue()
+    with open_session(SessionArgs(mode="client", connect=[bus.endpoint], certs=bus.certs, identity="taxi-1")) as session:
+        session.declare_subscriber(keys.turn(1), lambda s: turns.put(decode(s.payload.to_bytes(), Turn).t))
+        session.declare_subscriber(keys.committed(1), lambda s: committed.put(decode(s.payload.to_bytes(), Control)))
+        try:
+            coord.wait_for("all 3 agents joined")
+            while (c := committed.get(timeout=60)).by != "agent" or c.t < 2:
+                pass
+            agents[1].proc.send_signal(signal.SIGSTOP)  # it has answered minute c.t; its next turn stays unanswered
+            t = _next_turn(turns, c.t + 1)
+            coord.proc.send_signal(signal.SIGSTOP)
+            agents[1].proc.send_signal(signal.SIGKILL)
+            agents[1].finish(30)
+            token = session.liveliness().declare_token(keys.alive(1))
+            time.sleep(1.0)  # the router holds the departure and the return for the stopped coordinator
+            coord.proc.send_signal(signal.SIGCONT)
+            gone = coord.wait_for(f"minute {t}: agent 1 gone; base control used", timeout=30)
+            token.undeclare()
+        finally:
+            for p in (coord, *agents):
+                p.kill()
+    lines = coord.lines
+    assert lines.index(coord.wait_for("agent 1 left")) < lines.index(coord.wait_for("agent 1 is back")) < lines.index(gone)
+    assert "silent for" not in coord.text
+
+
 def test_a_stopped_coordinator_stops_its_agents_within_the_grace_period(bus: Bus) -> None:
     """SIGTERM: the coordinator publishes stop and every agent leaves at once; SIGKILL: they leave after the grace period."""
     grace = 4.0
@@ -323,6 +361,11 @@ def test_health_tells_a_partition_from_single_departures() -> None:
     for a in (0, 1, 2):
         h.ack(a, 5, current=5)
     assert h.healed({0, 1, 2}, 5) == (True, True) and "agent 1 is back" in said
+    sent = time.monotonic()
+    assert not h.lost_since(1, sent) and h.lost_since(3, sent)  # 1 is back from before the turn went out; 3 is gone
+    h.token(1, False, running=True)
+    h.token(1, True, running=True)
+    assert h.lost_since(1, sent) and not h.lost_since(1, time.monotonic())  # it left after: the turn went with it
     h.missed({2}, 6, 1.5)
     h.ack(2, 5, current=6)
     assert 2 in h.suspect
