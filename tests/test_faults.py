@@ -108,22 +108,55 @@ class Bus:
     def agent(self, i: int, run: str, grace: float) -> Logged:
         return Logged([sys.executable, "-c", AGENT, str(i), run, self.endpoint, self.certs, str(grace)])
 
-    def watch_turns(self, agent: int, run: str) -> tuple[object, queue.SimpleQueue]:
-        """A session as taxi ``agent`` that hands each of its turns' minutes to a queue."""
-        from bus.keys import Keys
-        from bus.session import SessionArgs, open_session
-        from bus.wire import Turn, decode
-
-        turns: queue.SimpleQueue = queue.SimpleQueue()
-        ctx = open_session(SessionArgs(mode="client", connect=[self.endpoint], certs=self.certs, identity=f"taxi-{agent}"))
-        session = ctx.__enter__()
-        session.declare_subscriber(Keys(run).turn(agent), lambda s: turns.put(decode(s.payload.to_bytes(), Turn).t))
-        return ctx, turns
+    def watch(self, agent: int, run: str) -> "Watch":
+        return Watch(self, agent, run)
 
     def close(self) -> None:
         if self.router is not None and self.router.poll() is None:
             self.router.terminate()
             self.router.wait(10)
+
+
+class Watch:
+    """A session as taxi ``agent``, as that taxi would hold one: its turns' minutes and its committed controls, in queues.
+
+    With it the test can stop the taxi's process with a turn provably
+    outstanding (:meth:`stop_with_a_turn_outstanding`), however fast it plans.
+    """
+
+    def __init__(self, bus: Bus, agent: int, run: str) -> None:
+        from bus.keys import Keys
+        from bus.session import SessionArgs, open_session
+        from bus.wire import Control, Turn, decode
+
+        self.keys = Keys(run)
+        self.turns: queue.SimpleQueue = queue.SimpleQueue()
+        self.committed: queue.SimpleQueue = queue.SimpleQueue()
+        self._ctx = open_session(SessionArgs(mode="client", connect=[bus.endpoint], certs=bus.certs, identity=f"taxi-{agent}"))
+        self.session = self._ctx.__enter__()
+        self.session.declare_subscriber(self.keys.turn(agent), lambda s: self.turns.put(decode(s.payload.to_bytes(), Turn).t))
+        self.session.declare_subscriber(self.keys.committed(agent), lambda s: self.committed.put(decode(s.payload.to_bytes(), Control)))
+
+    def stop_after_an_answer(self, agent: Logged, after: int) -> int:
+        """SIGSTOP ``agent`` once it has answered a turn of minute ``after`` or later; the latest minute it answered, as far as seen."""
+        answered = -1
+        while answered < after or not self.committed.empty():
+            if (c := self.committed.get(timeout=120)).by == "agent":
+                answered = max(answered, c.t)
+        agent.proc.send_signal(signal.SIGSTOP)
+        return answered
+
+    def stop_with_a_turn_outstanding(self, agent: Logged, after: int) -> int:
+        """:meth:`stop_after_an_answer`, then the minute of its first turn left unanswered, exactly."""
+        answered = self.stop_after_an_answer(agent, after)
+        time.sleep(0.5)  # a control it sent before it stopped is committed by now
+        while not self.committed.empty():
+            if (c := self.committed.get()).by == "agent":
+                answered = max(answered, c.t)
+        return _next_turn(self.turns, answered + 1)
+
+    def close(self) -> None:
+        self._ctx.__exit__(None, None, None)
 
 
 @pytest.fixture
@@ -240,19 +273,16 @@ def test_a_killed_agent_rejoins_and_a_hung_agent_costs_one_deadline(bus: Bus, tm
     run, minutes, deadline, out = "agents", 40, 1.5, tmp_path / "result.json"
     coord = _coordinator(bus, run, "--json", str(out), minutes=minutes, deadline=deadline, minute_s=0.4)
     agents = {i: bus.agent(i, run, grace=60) for i in range(3)}
-    watch = [bus.watch_turns(i, run) for i in (1, 2)]
+    watch = {i: bus.watch(i, run) for i in (1, 2)}
     try:
         coord.wait_for("all 3 agents joined")
-        _next_turn(watch[0][1], 3)
-        agents[1].proc.send_signal(signal.SIGKILL)
+        t_kill = _next_turn(watch[1].turns, watch[1].stop_after_an_answer(agents[1], 2) + 1)
+        agents[1].proc.send_signal(signal.SIGKILL)  # at once, well within its turn's deadline
         agents[1].finish(30)
         coord.wait_for("agent 1 left")
         agents[1] = bus.agent(1, run, grace=60)
         coord.wait_for("agent 1 is back")
-        while not watch[1][1].empty():
-            watch[1][1].get()
-        t_stop = _next_turn(watch[1][1], 0)
-        agents[2].proc.send_signal(signal.SIGSTOP)
+        t_stop = watch[2].stop_with_a_turn_outstanding(agents[2], t_kill)
         coord.wait_for("agent 2 silent for", timeout=60)
         time.sleep(2 * deadline)  # minutes go by with agent 2 suspect
         agents[2].proc.send_signal(signal.SIGCONT)
@@ -260,8 +290,8 @@ def test_a_killed_agent_rejoins_and_a_hung_agent_costs_one_deadline(bus: Bus, tm
         assert coord.finish(180) == 0, coord.text
         assert [agents[i].finish(60) for i in range(3)] == [0, 0, 0], "\n".join(a.text for a in agents.values())
     finally:
-        for ctx, _ in watch:
-            ctx.__exit__(None, None, None)
+        for w in watch.values():
+            w.close()
         for p in (coord, *agents.values()):
             p.kill()
     result = json.loads(out.read_text())
@@ -281,35 +311,25 @@ def test_an_agent_back_before_its_departure_settles_gets_the_base_control_at_onc
     """Agent 1 is stopped with a turn outstanding, then killed while the coordinator is stopped too, and a process
     declares its token at once: the coordinator sees it leave and come back in one burst.  The turn went with the
     process that left, so it is the base control now, not a wait for the deadline (the race a fast restart hit)."""
-    from bus.keys import Keys
-    from bus.session import SessionArgs, open_session
-    from bus.wire import Control, Turn, decode
-
-    run, keys = "back", Keys("back")
+    run = "back"
     coord = _coordinator(bus, run, minutes=60, deadline=60, minute_s=0.4)
     agents = [bus.agent(i, run, grace=60) for i in range(3)]
-    turns: queue.SimpleQueue = queue.SimpleQueue()
-    committed: queue.SimpleQueue = queue.SimpleQueue()
-    with open_session(SessionArgs(mode="client", connect=[bus.endpoint], certs=bus.certs, identity="taxi-1")) as session:
-        session.declare_subscriber(keys.turn(1), lambda s: turns.put(decode(s.payload.to_bytes(), Turn).t))
-        session.declare_subscriber(keys.committed(1), lambda s: committed.put(decode(s.payload.to_bytes(), Control)))
-        try:
-            coord.wait_for("all 3 agents joined")
-            while (c := committed.get(timeout=60)).by != "agent" or c.t < 2:
-                pass
-            agents[1].proc.send_signal(signal.SIGSTOP)  # it has answered minute c.t; its next turn stays unanswered
-            t = _next_turn(turns, c.t + 1)
-            coord.proc.send_signal(signal.SIGSTOP)
-            agents[1].proc.send_signal(signal.SIGKILL)
-            agents[1].finish(30)
-            token = session.liveliness().declare_token(keys.alive(1))
-            time.sleep(1.0)  # the router holds the departure and the return for the stopped coordinator
-            coord.proc.send_signal(signal.SIGCONT)
-            gone = coord.wait_for(f"minute {t}: agent 1 gone; base control used", timeout=30)
-            token.undeclare()
-        finally:
-            for p in (coord, *agents):
-                p.kill()
+    watch = bus.watch(1, run)
+    try:
+        coord.wait_for("all 3 agents joined")
+        t = watch.stop_with_a_turn_outstanding(agents[1], 2)
+        coord.proc.send_signal(signal.SIGSTOP)
+        agents[1].proc.send_signal(signal.SIGKILL)
+        agents[1].finish(30)
+        token = watch.session.liveliness().declare_token(watch.keys.alive(1))  # a process back in its place at once
+        time.sleep(1.0)  # the router holds the departure and the return for the stopped coordinator
+        coord.proc.send_signal(signal.SIGCONT)
+        gone = coord.wait_for(f"minute {t}: agent 1 gone; base control used", timeout=30)
+        token.undeclare()
+    finally:
+        watch.close()
+        for p in (coord, *agents):
+            p.kill()
     lines = coord.lines
     assert lines.index(coord.wait_for("agent 1 left")) < lines.index(coord.wait_for("agent 1 is back")) < lines.index(gone)
     assert "silent for" not in coord.text
