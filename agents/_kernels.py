@@ -344,12 +344,15 @@ def rollout_costs(
     dist_t: np.ndarray,
     hop_t: np.ndarray,
     n_chunks: int,
+    list_first: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rollout cost of every candidate (rows of ``alive0``/``pos1``/``tfree1``) in every sample.
 
     ``e_pick``/``e_drop`` are the outstanding requests the rollout tracks
     (codes ``0 … R-1``, oldest first) and ``near``/``near_d`` their
-    :func:`nearest_lists`; rows not listed yet are listed first, before the threads read them.  Each sample's arrivals are drawn once and shared
+    :func:`nearest_lists`; rows not listed yet are listed first, before the threads read them (with
+    ``list_first`` false, on one thread, each row is listed when a taxi first searches from it, as the
+    serial kernel does).  Each sample's arrivals are drawn once and shared
     by all candidates (common random numbers).  Samples run in parallel in
     ``n_chunks`` contiguous chunks with per-chunk scratch space; the result
     does not depend on the number of threads or chunks.
@@ -367,7 +370,8 @@ def rollout_costs(
     n_samples = s_hi - s_lo
     out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)
     settled = np.zeros((alive0.shape[0], n_samples), dtype=np.bool_)
-    fill_lists(near, near_d, e_pick, dist)
+    if list_first:
+        fill_lists(near, near_d, e_pick, dist)
     plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist, dist_t)
     n_chunks = max(1, min(n_samples, n_chunks))
     for chunk in prange(n_chunks):

@@ -276,8 +276,11 @@ def _pickup_spots(ctx: StepContext, sectors: np.ndarray, rel_node: np.ndarray, t
 
 
 def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray, serial: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    kernel, chunks = (K.rollout_costs_serial, 1) if serial else (K.rollout_costs, 8 * numba.get_num_threads())
-    return kernel(*kernel_args(ctx, inp, s_lo, s_hi, active), chunks)
+    if serial:
+        return K.rollout_costs_serial(*kernel_args(ctx, inp, s_lo, s_hi, active), 1)
+    threads = numba.get_num_threads()
+    # On one thread no row is read while another thread lists it: rows are listed as taxis first search from them.
+    return K.rollout_costs(*kernel_args(ctx, inp, s_lo, s_hi, active), 8 * threads, threads > 1)
 
 
 def kernel_args(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray) -> tuple:
@@ -327,8 +330,7 @@ def choose(cands: np.ndarray, costs: np.ndarray) -> int:
 SHARE_CHUNKS = 4
 
 
-def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Callable[[], int] | None = None,
-               regions: bool = False) -> int:
+def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Callable[[], int] | None = None) -> int:
     """One agent's rollout control: a pure function of the context, ``committed`` and ``agent``.
 
     A busy agent gets its forced next hop without planning.  With
@@ -339,14 +341,12 @@ def plan_agent(ctx: StepContext, committed: np.ndarray, agent: int, threads: Cal
     chunks of samples (or each adaptive batch) how many kernel threads to run
     it on (one: on the calling thread alone, :func:`_serial_now`;
     :class:`agents.cores.CoreShare`, :meth:`agents.rollout_policy.RolloutPolicy._act_waves`);
-    the control does not depend on it.  With ``regions``, a one-thread share
-    may run a one-thread parallel region instead (:func:`_serial_now`).
+    the control does not depend on it.
     """
-    return _plan(ctx, committed, agent, serial=False, threads=threads, regions=regions)
+    return _plan(ctx, committed, agent, serial=False, threads=threads)
 
 
-def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, threads: Callable[[], int] | None = None,
-          regions: bool = False) -> int:
+def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, threads: Callable[[], int] | None = None) -> int:
     """:func:`plan_agent`; ``serial`` runs the samples in the calling thread without the GIL (same result)."""
     if ctx.obs.tau[agent] > 0:
         return int(ctx.base_controls[agent])
@@ -356,11 +356,11 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
         ctx.stats.add(True, False, 0, 0)
         return int(inp.cands[0])
     if ctx.config.adaptive is not None:
-        return adaptive_choice(ctx, inp, serial, threads, regions)
+        return adaptive_choice(ctx, inp, serial, threads)
     if threads is None or serial:
         costs, settled = _run(ctx, inp, 0, S, np.ones(n_c, dtype=bool), serial)
     else:
-        parts = [_run(ctx, inp, c * S // SHARE_CHUNKS, (c + 1) * S // SHARE_CHUNKS, np.ones(n_c, dtype=bool), _serial_now(False, threads, regions))
+        parts = [_run(ctx, inp, c * S // SHARE_CHUNKS, (c + 1) * S // SHARE_CHUNKS, np.ones(n_c, dtype=bool), _serial_now(False, threads))
                  for c in range(SHARE_CHUNKS)]
         costs, settled = (np.concatenate(x, axis=1) for x in zip(*parts))
     shadowed = int(settled.sum())
@@ -368,8 +368,7 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
     return choose(inp.cands, costs)
 
 
-def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, threads: Callable[[], int] | None = None,
-                    regions: bool = False) -> int:
+def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, threads: Callable[[], int] | None = None) -> int:
     """Successive elimination with common random numbers, deterministic for a seed.
 
     After each batch, the best candidate is the one of least total cost over
@@ -389,7 +388,7 @@ def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, thread
     lo, left = 0, n_c
     while lo < cfg.samples and left > 1:
         hi = min(cfg.samples, lo + cfg.batch)
-        part, settled = _run(ctx, inp, lo, hi, active, _serial_now(serial, threads, regions))
+        part, settled = _run(ctx, inp, lo, hi, active, _serial_now(serial, threads))
         done = int(settled.sum())
         run += left * (hi - lo) - done
         shadowed += done
@@ -400,29 +399,30 @@ def adaptive_choice(ctx: StepContext, inp: _Inputs, serial: bool = False, thread
     return int(inp.cands[best_candidate(costs, lo, active)])
 
 
-def _serial_now(serial: bool, threads: Callable[[], int] | None, regions: bool = False) -> bool:
+def _serial_now(serial: bool, threads: Callable[[], int] | None) -> bool:
     """Whether the next kernel call runs the serial kernel: if ``serial``, or if ``threads`` now allows one (else it runs on as many as allowed).
 
-    With ``regions`` a one-thread share runs the parallel kernel on one thread
-    instead, where :func:`_threadsafe_regions` allows it.  The parallel kernel
-    on one thread computes faster than the serial kernel (numba compiles the
-    same loop body better inside a parallel region; BENCHMARKS "Session 32").
-    Only the in-process policy's agents ask for it
-    (:meth:`agents.rollout_policy.RolloutPolicy._act_waves`); a fleet's agent
-    processes keep the serial kernel their fork server preloads
-    (:mod:`agents.preload`).
+    A one-thread share runs the parallel kernel on one thread instead where
+    :func:`_threadsafe_regions` allows it: it computes faster than the serial
+    kernel (numba compiles the same loop body better inside a parallel
+    region; BENCHMARKS "Session 32").  Agents side by side, in-process
+    (:meth:`agents.rollout_policy.RolloutPolicy._act_waves`) or a fleet's
+    processes on one host (:class:`agents.cores.CoreShare`), get it once
+    they have run a region; a fleet's agent does when it warms its kernels
+    up (:meth:`agents.taxi.TaxiAgent._warm_up`).  Their fork server never
+    starts the layer (:mod:`agents.preload`).
     """
     if serial or threads is None:
         return serial
     n = threads()
-    if n == 1 and not (regions and _threadsafe_regions()):
+    if n == 1 and not _threadsafe_regions():
         return True
     set_kernel_threads(n)
     return False
 
 
 def _threadsafe_regions() -> bool:
-    """Whether this process runs parallel regions under a layer that takes them from several threads at once (OpenMP, TBB; not workqueue)."""
+    """Whether this process has started a threading layer that takes parallel regions from several threads at once (OpenMP, TBB; not workqueue)."""
     try:
         return numba.threading_layer() in ("omp", "tbb")
     except ValueError:

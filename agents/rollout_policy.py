@@ -202,7 +202,7 @@ class RolloutPolicy(Policy):
             with lock:
                 running[0] += 1
             try:
-                return plan_agent(ctx, seen, agent, threads=share, regions=True)
+                return plan_agent(ctx, seen, agent, threads=share)
             finally:
                 with lock:
                     running[0] -= 1

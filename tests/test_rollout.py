@@ -18,6 +18,7 @@ from agents.rollout import (
     CE_MODES,
     DemandTables,
     RolloutConfig,
+    StepContext,
     agent_costs,
     candidate_controls,
     choose,
@@ -315,16 +316,15 @@ def test_adaptive_statistics_are_numpys_to_the_last_bit() -> None:
             assert left == kept.sum()
 
 
-def test_a_one_thread_share_runs_a_one_thread_region_where_asked_and_the_layer_allows() -> None:
-    """In-process agents side by side (``regions``) run the parallel kernel on one thread under OpenMP or TBB; others the serial kernel."""
+def test_a_one_thread_share_runs_a_one_thread_region_where_the_layer_allows() -> None:
+    """Once the process runs OpenMP or TBB regions, a share of one runs the parallel kernel on one thread; otherwise the serial kernel."""
     from agents.rollout import _serial_now, _threadsafe_regions
 
     before = numba.get_num_threads()  # starts the threading layer
     try:
         threadsafe = numba.threading_layer() in ("omp", "tbb")
         assert _threadsafe_regions() == threadsafe
-        assert _serial_now(False, lambda: 1)  # a fleet's agent process: the serial kernel
-        assert _serial_now(False, lambda: 1, regions=True) == (not threadsafe)
+        assert _serial_now(False, lambda: 1) == (not threadsafe)
         assert numba.get_num_threads() == (1 if threadsafe else before)
         assert _serial_now(True, lambda: 2) and not _serial_now(False, lambda: 2)
         assert numba.get_num_threads() == min(2, numba.config.NUMBA_NUM_THREADS)
@@ -333,23 +333,36 @@ def test_a_one_thread_share_runs_a_one_thread_region_where_asked_and_the_layer_a
 
 
 def test_adaptive_decisions_do_not_depend_on_threads() -> None:
-    """Adaptive batches run on the kernel threads, in the calling thread, or as a core share allows: one choice."""
+    """Adaptive batches run on the kernel threads, in the calling thread, or as a core share allows: one choice.
+
+    Each way plans the step from a fresh context, so that each lists the
+    nearest requests itself (up front, or lazily on one thread).
+    """
     from agents.rollout import _plan
 
     city = grid_city(7, 6)
     obs = random_state(city, np.random.default_rng(6), taxis=10, requests=9)
-    ctx = context(city, obs, uniform_forecast(city, [0.6, 1.4, 0.2, 2.0]), horizon=4, samples=96, seed=2)
-    ctx = dataclasses.replace(ctx, config=dataclasses.replace(ctx.config, adaptive=1.0, batch=8))
+
+    def fresh() -> StepContext:
+        ctx = context(city, obs, uniform_forecast(city, [0.6, 1.4, 0.2, 2.0]), horizon=4, samples=96, seed=2)
+        return dataclasses.replace(ctx, config=dataclasses.replace(ctx.config, adaptive=1.0, batch=8))
+
     shares = iter([1, 2] * 1000)  # a share that changes from batch to batch
-    runs: dict[str, list[int]] = {"kernel threads": [], "calling thread": [], "shared": []}
-    u = ctx.base_controls.copy()
+    ways = {
+        "kernel threads": lambda ctx, u, a: plan_agent(ctx, u, a),
+        "calling thread": lambda ctx, u, a: _plan(ctx, u, a, serial=True),
+        "shared": lambda ctx, u, a: plan_agent(ctx, u, a, threads=lambda: next(shares)),
+    }
+    runs: dict[str, list[int]] = {}
     before = numba.get_num_threads()
     try:
-        for agent in np.flatnonzero(obs.tau == 0):
-            runs["kernel threads"].append(plan_agent(ctx, u[:agent], int(agent)))
-            runs["calling thread"].append(_plan(ctx, u[:agent], int(agent), serial=True))
-            runs["shared"].append(plan_agent(ctx, u[:agent], int(agent), threads=lambda: next(shares)))
-            u[agent] = runs["kernel threads"][-1]
+        for name, plan in ways.items():
+            ctx = fresh()
+            u = ctx.base_controls.copy()
+            runs[name] = []
+            for agent in np.flatnonzero(obs.tau == 0):
+                runs[name].append(plan(ctx, u[:agent], int(agent)))
+                u[agent] = runs[name][-1]
     finally:
         numba.set_num_threads(before)
     assert len(runs["kernel threads"]) >= 5
