@@ -108,7 +108,7 @@ class Bus:
     def agent(self, i: int, run: str, grace: float) -> Logged:
         return Logged([sys.executable, "-c", AGENT, str(i), run, self.endpoint, self.certs, str(grace)])
 
-    def watch(self, agent: int, run: str) -> "Watch":
+    def watch(self, agent: int, run: str) -> Watch:
         return Watch(self, agent, run)
 
     def close(self) -> None:
