@@ -350,7 +350,7 @@ def rollout_costs(
 
     ``e_pick``/``e_drop`` are the outstanding requests the rollout tracks
     (codes ``0 … R-1``, oldest first) and ``near``/``near_d`` their
-    :func:`nearest_lists`; rows not listed yet are listed first, before the threads read them (with
+    :func:`nearest_lists`; rows not listed yet are listed first, by the threads side by side, before they read them (with
     ``list_first`` false, on one thread, each row is listed when a taxi first searches from it, as the
     serial kernel does).  Each sample's arrivals are drawn once and shared
     by all candidates (common random numbers).  Samples run in parallel in
@@ -370,8 +370,10 @@ def rollout_costs(
     n_samples = s_hi - s_lo
     out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)
     settled = np.zeros((alive0.shape[0], n_samples), dtype=np.bool_)
-    if list_first:
-        fill_lists(near, near_d, e_pick, dist)
+    if list_first and near.shape[1] > 0:
+        for v in prange(near.shape[0]):  # rows apart: the threads list them side by side
+            if near_d[v, 0] < 0:
+                _fill_row(v, near, near_d, e_pick, dist)
     plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist, dist_t)
     n_chunks = max(1, min(n_samples, n_chunks))
     for chunk in prange(n_chunks):
