@@ -16,9 +16,9 @@ Conventions shared with :mod:`agents.rollout`:
 * ``near[v]``/``near_d[v]`` list the tracked requests nearest to node ``v``
   (:func:`nearest_lists`); when all of them are gone a search scans every
   tracked request.  A row whose first distance is -1 is not listed yet: a
-  search from ``v`` lists it (:func:`unfilled_lists`), so a serial rollout
-  lists only the nodes its taxis visit.  The parallel kernel lists every row
-  first (:func:`fill_lists`).
+  search from ``v`` lists it (:func:`unfilled_lists`), so a rollout lists
+  only the nodes its taxis visit.  The parallel kernel's threads each list
+  into a copy of their own (:func:`rollout_costs`).
 * A taxi is *free from step* ``tfree``: a taxi that picks up at step ``k``
   with trip length ``τ`` is free from step ``k + 1 + τ`` at its drop-off.  Busy
   taxis cannot act, so their intermediate positions are not tracked.
@@ -85,7 +85,7 @@ def unfilled_lists(n: int, r0: int, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 @njit(cache=True)
 def fill_lists(near: np.ndarray, near_d: np.ndarray, pickups: np.ndarray, dist: np.ndarray) -> None:
-    """List every row of :func:`unfilled_lists` not listed yet (threads must not list rows as they read them)."""
+    """List every row of :func:`unfilled_lists` not listed yet."""
     if near.shape[1] == 0:
         return
     for v in range(near.shape[0]):
@@ -344,18 +344,21 @@ def rollout_costs(
     dist_t: np.ndarray,
     hop_t: np.ndarray,
     n_chunks: int,
-    list_first: bool = True,
+    groups: int = 1,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rollout cost of every candidate (rows of ``alive0``/``pos1``/``tfree1``) in every sample.
 
     ``e_pick``/``e_drop`` are the outstanding requests the rollout tracks
     (codes ``0 … R-1``, oldest first) and ``near``/``near_d`` their
-    :func:`nearest_lists`; rows not listed yet are listed first, by the threads side by side, before they read them (with
-    ``list_first`` false, on one thread, each row is listed when a taxi first searches from it, as the
-    serial kernel does).  Each sample's arrivals are drawn once and shared
-    by all candidates (common random numbers).  Samples run in parallel in
-    ``n_chunks`` contiguous chunks with per-chunk scratch space; the result
-    does not depend on the number of threads or chunks.
+    :func:`nearest_lists`, each row listed when a taxi first searches from
+    it, as the serial kernel does: a decision's taxis search from a few
+    percent of the nodes.  Each sample's arrivals are drawn once and shared
+    by all candidates (common random numbers).  Samples run in ``n_chunks``
+    contiguous chunks with per-chunk scratch space, split into ``groups``
+    run side by side (one per kernel thread); each group lists rows in a
+    copy of the lists of its own, so no thread reads a row another is
+    listing, and the rows listed are kept in ``near``/``near_d`` afterwards.
+    The result does not depend on the number of threads, groups or chunks.
 
     Samples ``s_lo … s_hi-1`` are run, for the candidates flagged ``active``
     (the others get 0).  With the greedy base and ``shadow[0]``, candidates
@@ -370,18 +373,32 @@ def rollout_costs(
     n_samples = s_hi - s_lo
     out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)
     settled = np.zeros((alive0.shape[0], n_samples), dtype=np.bool_)
-    if list_first and near.shape[1] > 0:
-        for v in prange(near.shape[0]):  # rows apart: the threads list them side by side
-            if near_d[v, 0] < 0:
-                _fill_row(v, near, near_d, e_pick, dist)
     plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist, dist_t)
     n_chunks = max(1, min(n_samples, n_chunks))
-    for chunk in prange(n_chunks):
-        _run_samples(
-            s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
-            active, shadow, share, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
-            sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals, dist, dist_t, hop_t,
-        )
+    n_groups = max(1, min(n_chunks, groups))
+    copies = n_groups if n_groups > 1 else 0  # one group lists in the lists themselves
+    g_near = np.empty((copies,) + near.shape, dtype=near.dtype)
+    g_near_d = np.empty((copies,) + near_d.shape, dtype=near_d.dtype)
+    for g in prange(n_groups):
+        if copies:
+            g_near[g] = near
+            g_near_d[g] = near_d
+            lists, lists_d = g_near[g], g_near_d[g]
+        else:
+            lists, lists_d = near, near_d
+        for chunk in range(g * n_chunks // n_groups, (g + 1) * n_chunks // n_groups):
+            _run_samples(
+                s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
+                active, shadow, share, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop,
+                lists, lists_d, rel_node, sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals,
+                dist, dist_t, hop_t,
+            )
+    if near.shape[1] > 0:
+        for g in range(copies):
+            for v in range(near.shape[0]):
+                if near_d[v, 0] < 0 and g_near_d[g, v, 0] >= 0:
+                    near[v] = g_near[g, v]
+                    near_d[v] = g_near_d[g, v]
     return out, settled
 
 

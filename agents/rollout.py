@@ -279,8 +279,7 @@ def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarra
     if serial:
         return K.rollout_costs_serial(*kernel_args(ctx, inp, s_lo, s_hi, active), 1)
     threads = numba.get_num_threads()
-    # On one thread no row is read while another thread lists it: rows are listed as taxis first search from them.
-    return K.rollout_costs(*kernel_args(ctx, inp, s_lo, s_hi, active), 8 * threads, threads > 1)
+    return K.rollout_costs(*kernel_args(ctx, inp, s_lo, s_hi, active), 8 * threads, threads)
 
 
 def kernel_args(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray) -> tuple:

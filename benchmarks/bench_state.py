@@ -82,10 +82,14 @@ def replay(calls: list[tuple], kernel, chunks: Callable[[int], int] | None = Non
     """Seconds to run captured ``calls`` again with ``kernel`` (either rollout kernel).
 
     ``chunks`` gives a call's chunk count from its number of samples; by
-    default 8 per kernel thread, as ``agents.rollout._run`` runs the parallel kernel.
+    default 8 per kernel thread, as ``agents.rollout._run`` runs the parallel
+    kernel, which gets one group of chunks per kernel thread too.
     """
+    import agents._kernels as K
+
+    groups = (numba.get_num_threads(),) if kernel is K.rollout_costs else ()
     t0 = time.perf_counter()
     for ctx, inp, lo, hi, active, _ in calls:
         n = chunks(hi - lo) if chunks else 8 * numba.get_num_threads()
-        kernel(*R.kernel_args(ctx, inp, lo, hi, active), n)
+        kernel(*R.kernel_args(ctx, inp, lo, hi, active), n, *groups)
     return time.perf_counter() - t0

@@ -332,6 +332,36 @@ def test_a_one_thread_share_runs_a_one_thread_region_where_the_layer_allows() ->
         numba.set_num_threads(before)
 
 
+def test_the_parallel_kernel_gives_one_result_in_any_number_of_groups_and_lists_rows_as_listed_up_front() -> None:
+    """Each group of chunks lists nearest requests lazily in a copy of its own, merged back after the region."""
+    from agents.rollout import _decision_inputs, kernel_args
+
+    city = grid_city(7, 6)
+    obs = random_state(city, np.random.default_rng(11), taxis=10, requests=9)
+    ctx = context(city, obs, uniform_forecast(city, [0.6, 1.4, 0.2, 2.0]), horizon=4, samples=64, seed=3)
+    u = ctx.base_controls.copy()
+    agent = next(int(a) for a in np.flatnonzero(obs.tau == 0) if _decision_inputs(ctx, u[:a], int(a)).cands.size > 1)
+    runs = []
+    before = numba.get_num_threads()
+    try:
+        for threads, chunks, groups in ((1, 8, 1), (2, 16, 2), (2, 5, 3), (2, 16, 1), (2, 2, 7)):
+            numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+            inp = _decision_inputs(ctx, u[:agent], agent)  # its lists fresh, no row listed
+            assert (inp.args[9][:, 0] < 0).all()
+            out, settled = K.rollout_costs(*kernel_args(ctx, inp, 0, 64, np.ones(inp.cands.size, dtype=bool)), chunks, groups)
+            runs.append((out, settled, inp.args[8], inp.args[9], inp.args[6]))
+    finally:
+        numba.set_num_threads(before)
+    for out, settled, near, near_d, e_pick in runs:
+        np.testing.assert_array_equal(out, runs[0][0])
+        np.testing.assert_array_equal(settled, runs[0][1])
+        listed = near_d[:, 0] >= 0
+        ref, ref_d = K.nearest_lists(city.dist, e_pick, near.shape[1])
+        assert listed.any() and (listed == (runs[0][3][:, 0] >= 0)).all()  # the rows the samples searched from, all kept
+        np.testing.assert_array_equal(near[listed], ref[listed])
+        np.testing.assert_array_equal(near_d[listed], ref_d[listed])
+
+
 def test_adaptive_decisions_do_not_depend_on_threads() -> None:
     """Adaptive batches run on the kernel threads, in the calling thread, or as a core share allows: one choice.
 
