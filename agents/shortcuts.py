@@ -41,8 +41,8 @@ class Shortcuts:
     lazy_lists : bool
         A decision's nearest-request lists are made for the nodes its taxis
         search from, when they first do, instead of for every node of the map
-        beforehand.  Serial rollouts only (:func:`agents.rollout._serial_now`);
-        the parallel kernel gets them whole, also on one thread.
+        beforehand.  Both kernels; the parallel one's threads each list into
+        a copy of their own (:func:`agents._kernels.rollout_costs`).
     """
 
     skip: bool = True

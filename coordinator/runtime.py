@@ -478,6 +478,9 @@ class Coordinator:
                 if not blocking[j]:
                     ready.append(j)
 
+        def lost() -> set[int]:  # waiting agents gone, or gone and back, since their turn went out
+            return {a for a in self.waiting if health.lost_since(a, sent[a])}
+
         def again(agents: set[int]) -> None:  # after a partition healed: what was sent meanwhile is lost, and the clock did not run
             now = time.monotonic()
             for a in sorted(agents):
@@ -502,9 +505,9 @@ class Coordinator:
                     else:
                         self.waiting.add(a)
                         sent[a], deadline[a] = now, now + self.cfg.deadline_s
-            elif any(health.lost_since(a, sent[a]) for a in self.waiting):
+            elif lost():
                 healed = self._partition(inbox, t)
-                gone = self.waiting - health.alive if healed else {a for a in self.waiting if health.lost_since(a, sent[a])}
+                gone = self.waiting - health.alive if healed else lost()  # again: more may have left while it settled
                 if gone:
                     log(f"minute {t}: {agents_text(gone)} gone; base control used")
                     for a in sorted(gone):
