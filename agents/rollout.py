@@ -51,10 +51,11 @@ non-pickup candidates for the agent alone, leave out taxis that cannot reach
 a pickup, transposed distance rows, one nearest-request search per node and
 step, nearest-request lists made as taxis need them) are switchable, and
 ``tests/test_planning_speed.py`` shows each leaves every decision as it was,
-with and without the approximations.  Two approximations are options, off by
-default: ``adaptive`` (successive elimination of candidates on paired
-differences) and ``cap`` (the agent's nearest taxis only; with the greedy
-base, the nearest of those that can pick up).
+with and without the approximations.  Two approximations are settings, off in
+a bare :class:`RolloutConfig` and on in the ``surge`` policy's defaults:
+``adaptive`` (successive elimination of candidates on paired differences) and
+``cap`` (the agent's nearest taxis only; with the greedy base, the nearest of
+those that can pick up).
 """
 
 from __future__ import annotations

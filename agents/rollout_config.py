@@ -43,13 +43,13 @@ class RolloutConfig:
         Leave out taxis and requests farther than this many hops (either
         direction) from the deciding agent; ``None`` simulates the whole map.
     cap : int or None
-        Approximation, off by default: simulate at most this many taxis, the
+        Approximation, off here (the ``surge`` policy's default is 24): simulate at most this many taxis, the
         agent and its nearest (in hops, either direction), besides the radius.
         With the greedy base only taxis that can reach a possible pickup within
         the horizon are ranked (the others never change a cost), so the exact
         shortcuts stay exact under the cap.
     adaptive : float or None
-        Approximation, off by default: run the samples in batches of
+        Approximation, off here (the ``surge`` policy's default is 2, in batches of 50): run the samples in batches of
         ``batch`` and drop a candidate once its mean paired difference from
         the best candidate (common random numbers) exceeds ``adaptive``
         standard errors; the decision is the best of those left.
@@ -85,6 +85,12 @@ class RolloutConfig:
             raise ConfigError(f"rollout: adaptive must be a positive number of standard errors, got {self.adaptive}")
         if self.batch < 2:
             raise ConfigError(f"rollout: batch must be at least 2 samples, got {self.batch}")
+
+    def approximations(self) -> str:
+        """The approximations in words, for tables and logs (``"adaptive=2 in batches of 50, cap=24"``), or ``"exact"``."""
+        parts = ([f"adaptive={self.adaptive:g} in batches of {self.batch}"] if self.adaptive is not None else []) + \
+                ([f"cap={self.cap}"] if self.cap is not None else [])
+        return ", ".join(parts) or "exact"
 
 
 def default_prune(horizon: int) -> int:

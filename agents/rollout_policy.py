@@ -7,7 +7,11 @@ in their defaults.
     Greedy base policy; limited certainty equivalence (η rounded when at
     least one request per minute, a Bernoulli draw below); requests sampled
     only in the agent's sector and its adjacent sectors; forecast ``model``
-    by default.
+    by default.  It plans with two approximations by default (``adaptive=2``
+    in batches of 50, ``cap=24``): measured free in total cost at 100 and
+    1,000 taxis, and 4–7 times faster (BENCHMARKS.md, "Session 34").
+    ``adaptive=none,cap=none`` (:data:`EXACT`) plans exactly, as the paper
+    does; ``surge reproduce`` plans so.
 ``garces2023`` (Garces et al. 2023, the paper's baseline 3)
     Instantaneous-assignment base policy; standard certainty equivalence;
     requests sampled over the whole map; forecast ``previous-hour``.
@@ -28,7 +32,7 @@ from typing import Any, ClassVar
 import numba
 import numpy as np
 
-from agents.base import EpisodeContext, Option, Policy, register
+from agents.base import EpisodeContext, Option, Policy, register, split_policy
 from agents.demand_tables import DemandTables
 from agents.forecast import PROVIDERS, make_provider
 from agents.rollout import StepContext, plan_agent, prepare_step
@@ -39,6 +43,10 @@ from city.errors import ConfigError
 from city.forecast import Forecast, ForecastProvider
 from city.graph import City
 from city.sim import Observation
+
+
+#: ``cap`` or ``adaptive`` not given: the policy's default, which may be on (``None`` is off).
+DEFAULT = object()
 
 
 class RolloutPolicy(Policy):
@@ -56,7 +64,8 @@ class RolloutPolicy(Policy):
     prune : int or None or "auto"
         Pruning radius in hops; ``"auto"`` is :func:`default_prune` of the horizon.
     cap, adaptive, batch :
-        Approximations, off by default; see :class:`RolloutConfig`.
+        Approximations (see :class:`RolloutConfig`); ``None`` turns one off,
+        and an option not given takes the policy's default.
     workers : int, optional
         Threads planning independent agents at once (:mod:`agents.waves`,
         :meth:`_act_waves`); 1 (the default) plans one agent at a time with
@@ -116,12 +125,18 @@ class RolloutPolicy(Policy):
         ce: str | None = None,
         seed: int | None = None,
         prune: int | str | None = "auto",
-        cap: int | None = None,
-        adaptive: float | None = None,
+        cap: int | None | object = DEFAULT,
+        adaptive: float | None | object = DEFAULT,
         batch: int | None = None,
     ) -> RolloutConfig:
-        """The planner settings of this policy with ``None`` options at its defaults; no forecast is loaded."""
+        """The planner settings of this policy with the options not given at its defaults; no forecast is loaded.
+
+        ``cap`` and ``adaptive`` take ``None`` for "off", so their default is
+        :data:`DEFAULT` rather than ``None``.
+        """
         d = cls.defaults
+        cap = d["cap"] if cap is DEFAULT else cap
+        adaptive = d["adaptive"] if adaptive is DEFAULT else adaptive
         H = int(horizon if horizon is not None else d["horizon"])
         return RolloutConfig(
             horizon=H,
@@ -133,7 +148,7 @@ class RolloutPolicy(Policy):
             prune=default_prune(H) if prune == "auto" else (None if prune is None else int(prune)),
             cap=None if cap is None else int(cap),
             adaptive=None if adaptive is None else float(adaptive),
-            batch=int(batch) if batch is not None else 100,
+            batch=int(batch if batch is not None else d["batch"]),
         )
 
     def reset(self, context: EpisodeContext) -> None:
@@ -226,17 +241,35 @@ class RolloutPolicy(Policy):
                         heapq.heappush(ready, b)
 
 
+#: The approximation options of exact planning: what ``surge`` planned with by default until 2026-12-06, and
+#: ``garces2023`` still does.  With them a ``surge`` label plans as the paper does.
+EXACT: dict[str, Any] = {"cap": None, "adaptive": None, "batch": 100}
+
+
 @register
 class Surge(RolloutPolicy):
-    """The paper's method: greedy base, limited CE, local sampling, event-informed forecast."""
+    """The paper's method: greedy base, limited CE, local sampling, event-informed forecast; planned with approximations measured free."""
 
     name = "surge"
-    defaults: ClassVar[dict[str, Any]] = {"forecast": "model", "horizon": 10, "samples": 1000, "base": "greedy", "scope": "local", "ce": "limited"}
+    defaults: ClassVar[dict[str, Any]] = {"forecast": "model", "horizon": 10, "samples": 1000, "base": "greedy", "scope": "local", "ce": "limited",
+                                          "cap": 24, "adaptive": 2.0, "batch": 50}
 
 
 @register
 class Garces2023(RolloutPolicy):
-    """Garces et al. (2023): IA base, standard CE, whole-map sampling, previous-hour demand."""
+    """Garces et al. (2023): IA base, standard CE, whole-map sampling, previous-hour demand; planned exactly."""
 
     name = "garces2023"
-    defaults: ClassVar[dict[str, Any]] = {"forecast": "previous-hour", "horizon": 10, "samples": 1000, "base": "ia", "scope": "map", "ce": "standard"}
+    defaults: ClassVar[dict[str, Any]] = {"forecast": "previous-hour", "horizon": 10, "samples": 1000, "base": "ia", "scope": "map", "ce": "standard",
+                                          **EXACT}
+
+
+def pinned_options(label: str, values: dict[str, Any] = EXACT) -> dict[str, Any]:
+    """Those of ``values`` that ``label`` (``"surge:cap=12"``) does not set itself, for a ``surge`` label; none for any other.
+
+    Added to a label's options, the default :data:`EXACT` make it plan
+    exactly, as ``surge`` did by default until 2026-12-06, whatever its
+    default is now.
+    """
+    name, options = split_policy(label)
+    return {k: v for k, v in values.items() if k not in options} if name == Surge.name else {}

@@ -267,6 +267,8 @@ def _plan_child(args: argparse.Namespace, label: str) -> dict:
         "threads": numba.get_num_threads(),
         "workers": args.workers,
         "peak_rss_mb": peak_rss_mb(),
+        "rollout": dataclasses.asdict(policy.config),
+        "approximations": policy.config.approximations(),
         "city": scen.city.summary(),
     }
 
@@ -304,8 +306,8 @@ def bench_plan(args: argparse.Namespace) -> int:
             res = pool.submit(_plan_child, args, name).result()
         out["city"] = res.pop("city")
         out["policies"][name] = res
-        print(f"{name}: free taxis {res['free_taxis']}, critical path {res['critical_path']} waves, peak RSS {res['peak_rss_mb']:.0f} MB, "
-              f"first call {res['first_call_seconds']:.2f} s", flush=True)
+        print(f"{name} ({res['approximations']}): free taxis {res['free_taxis']}, critical path {res['critical_path']} waves, "
+              f"peak RSS {res['peak_rss_mb']:.0f} MB, first call {res['first_call_seconds']:.2f} s", flush=True)
         for v, rec in res["variants"].items():
             st = rec["plan_seconds_per_step"]
             per_free = statistics.median(rec["seconds_per_free_taxi"]) * 1e3

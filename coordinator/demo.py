@@ -22,7 +22,7 @@ def surge_vs_greedy(cfg, fleet: dict, out: Path) -> list[str]:  # noqa: ANN001
     figures.surge_map(city, scen.world, context.date, cfg.hour, tracks[0].pos[len(tracks[0].pos) // 2], map_path)
     figures.surge_gif(city, requests, tracks, gif_path, f"{cfg.scenario} {cfg.date} {cfg.hour}:00, {cfg.taxis} taxis")
     rows = [(f"{cfg.policy} (distributed)", fleet["total_cost"], fleet["outstanding_end"], fleet["served"])]
-    note = f"{cfg.policy} plans with the {cfg.forecast_name()} forecast; greedy uses none"
+    note = f"{cfg.policy} plans with the {cfg.forecast_name()} forecast ({cfg.rollout_config().approximations()}); greedy uses none"
     rows += [(f"{t.label} (in-process)", sum(t.cost), t.cost[-1], t.served) for t in tracks]
     n = len(requests)
     lines = [f"{cfg.taxis} taxis, {n} requests in {cfg.minutes} min from {cfg.date} {cfg.hour}:00 (same instance for every row)",

@@ -12,7 +12,11 @@ the gap closed is reported against ``oracle`` and ``oracle-auction``.
 Results files written before ``oracle`` became the route planner (they have
 no ``reference_oracle`` field) are read with their ``oracle`` rows renamed
 ``oracle-auction``, which is what they ran; their wait overheads are then
-measured against the auction, and the document says so.
+measured against the auction, and the document says so.  Files written
+before ``surge`` planned with approximations by default (they have no
+``surge_defaults`` field) are read with the exact settings they planned with
+pinned in every ``surge`` label's options (:func:`pin_surge_defaults`), so
+that a run of today's defaults never resumes from, or borrows, their rows.
 
 A policy is named as in the registry, optionally with options:
 ``surge:forecast=true-rate,samples=500``; the whole string labels its rows,
@@ -165,7 +169,8 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
         for done in [p for p in results if p in cfg.policies and p not in known]:
             known[done] = _row(date_text, hour, seed, done, results[done], *oracles, greedy)
             if keep_to is not None:
-                write_json({"config": asdict(cfg), "row": known[done]}, Path(keep_to) / _episode_file(date_text, hour, seed, done))
+                write_json({"config": asdict(cfg), "surge_defaults": surge_defaults(), "row": known[done]},
+                           Path(keep_to) / _episode_file(date_text, hour, seed, done))
     return [dict(known[name]) for name in cfg.policies]
 
 
@@ -220,7 +225,7 @@ def kept_episodes(cfg: EvalConfig, folder: Path, warn: Callable[[str], None]) ->
     for path in sorted(folder.glob("*.json")) if folder.is_dir() else []:
         try:
             saved = json.loads(path.read_text())
-            doc = {"config": saved["config"], "episodes": [saved["row"]]}
+            doc = {"config": pin_surge_defaults(saved["config"], saved.get("surge_defaults")), "episodes": [saved["row"]]}
             missing = _missing_field(saved["row"], ("date", *_EPISODE_FIELDS))
             if missing:
                 raise KeyError(missing)
@@ -230,6 +235,32 @@ def kept_episodes(cfg: EvalConfig, folder: Path, warn: Callable[[str], None]) ->
         for key, rows in borrowable(cfg, doc).items():
             out.setdefault(key, {}).update(rows)
     return out
+
+
+def surge_defaults() -> dict:
+    """The approximation options a ``surge`` label plans with when it does not set them; results files record them."""
+    from agents.rollout_policy import EXACT, Surge
+
+    return {k: Surge.defaults[k] for k in EXACT}
+
+
+def pin_surge_defaults(config: dict, recorded: dict | None) -> dict:
+    """``config`` (a results file's) with the ``surge`` defaults it ``recorded`` pinned in its labels' options, where they differ from today's.
+
+    ``recorded`` is the file's ``surge_defaults``; ``None`` (a file written
+    before the field) means exact planning, :data:`agents.rollout_policy.EXACT`.
+    """
+    from agents.rollout_policy import EXACT, pinned_options
+
+    recorded = EXACT if recorded is None else recorded
+    if recorded == surge_defaults():
+        return config
+    options = dict(config.get("policy_options", {}))
+    for label in config.get("policies", []):
+        pinned = pinned_options(label, recorded)
+        if pinned:
+            options[label] = {**pinned, **options.get(label, {})}
+    return {**config, "policy_options": options}
 
 
 def _instance_task(task: tuple) -> list[dict]:
@@ -291,7 +322,9 @@ def read_results(path: str | Path) -> dict:
     Older documents are brought up to date: one ``date`` becomes ``dates``,
     episodes get their date, and a document without ``reference_oracle``
     (written when ``oracle`` was the auction) has its ``oracle`` rows renamed
-    ``oracle-auction`` and ``reference_oracle: "oracle-auction"``.
+    ``oracle-auction`` and ``reference_oracle: "oracle-auction"``; the
+    ``surge`` defaults a document planned with are pinned in its labels'
+    options where they are not today's (:func:`pin_surge_defaults`).
     """
     path = Path(path)
     try:
@@ -323,6 +356,8 @@ def upgrade(doc: dict) -> dict:
         cfg["policies"] = [rename.get(p, p) for p in cfg.get("policies", [])]
         out["episodes"] = [{**e, "policy": rename.get(e["policy"], e["policy"]), "oracle_auction_cost": e["oracle_cost"]} for e in episodes]
         out["reference_oracle"] = "oracle-auction"
+    out["config"] = pin_surge_defaults(cfg, doc.get("surge_defaults"))
+    out["surge_defaults"] = surge_defaults()
     return out
 
 
@@ -405,6 +440,7 @@ def evaluate(
             "schema": RESULTS_SCHEMA,
             "scenario": cfg.scenario,
             "reference_oracle": "oracle",
+            "surge_defaults": surge_defaults(),
             "city": scen.city.summary(),
             "config": asdict(cfg),
             "episodes": sorted(episodes + [e for rows in pending.values() for e in rows.values()], key=lambda e: order[instance_key(e)]),

@@ -18,6 +18,9 @@ Steps, each showing progress on stderr:
    policies' rows and the oracles of these instances are taken from step 3;
 6. ``OUT/REPORT.md`` with its figures (:mod:`coordinator.report_md`).
 
+Both rollout policies plan exactly, as the paper's do: every ``surge`` label
+turns ``surge``'s default approximations off (:func:`_policy_options`).
+
 Every evaluation checkpoints its ``surge.results/1`` file under ``OUT`` after
 each instance and resumes from it, so an interrupted run continues where it
 stopped.  ``--quick`` runs 5 seeds on the paper's date only, fewer ablation
@@ -168,13 +171,20 @@ def evening_event_dates(world, n: int, exclude: str = PAPER_DATE, year: int = 20
 
 
 def _policy_options(run: Run, labels: list[str]) -> dict[str, dict]:
-    """Per-label options: the trained model for every forecast=model (surge's default), the run's sample count."""
+    """Per-label options: the trained model for every forecast=model (surge's default), the run's sample count, exact planning.
+
+    Every ``surge`` label plans exactly (:data:`agents.rollout_policy.EXACT`),
+    as the paper's method does and as ``garces2023`` does, so that the
+    comparisons are like with like; ``surge``'s default approximations are
+    measured apart (BENCHMARKS.md).
+    """
+    from agents.rollout_policy import pinned_options
     from coordinator.evaluate import parse_policy
 
     out = {}
     for label in labels:
         name, opts = parse_policy(label)
-        o: dict = {}
+        o: dict = pinned_options(label)
         if name in ("surge", "garces2023"):
             if run.protocol.samples is not None:
                 o["samples"] = run.protocol.samples

@@ -10,7 +10,7 @@ import pytest
 
 from city.errors import ConfigError, DataError
 from coordinator.analysis import bootstrap_ci, compare, complete_seeds, format_comparison, oracle_exceptions, summarize
-from coordinator.evaluate import EvalConfig, borrowable, evaluate, instance_seed, parse_policy, read_results, write_json
+from coordinator.evaluate import EvalConfig, borrowable, evaluate, instance_seed, parse_policy, read_results, upgrade, write_json
 
 
 #: The route-planning oracle with a short search: these tests are about the harness, not the planner.
@@ -178,6 +178,32 @@ def test_old_results_read_with_their_oracle_renamed(small_run: dict, tmp_path: P
     with pytest.raises(DataError, match="'oracle' was the auction"):
         evaluate(EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST),
                  progress=lambda _msg: None, checkpoint=path, resume=True)
+
+
+def test_results_planned_before_surge_had_approximations_read_as_exact(small_run: dict, tmp_path: Path) -> None:
+    """A file without ``surge_defaults`` was planned exactly: its surge labels read with the approximations off, so no run of today's defaults takes their rows."""
+    from agents.rollout_policy import EXACT
+
+    assert small_run["surge_defaults"] == {"cap": 24, "adaptive": 2.0, "batch": 50}
+    labels = ["surge:samples=8,forecast=true-rate", "surge:adaptive=3,cap=24,samples=8,forecast=true-rate"]
+    old = json.loads(json.dumps(small_run))
+    del old["surge_defaults"]
+    old["config"]["policies"] += labels
+    old["episodes"] += [{**e, "policy": label} for e in small_run["episodes"] if e["policy"] == "ia" for label in labels]
+    path = tmp_path / "old.json"
+    write_json(old, path)
+    doc = read_results(path)
+    assert doc["config"]["policy_options"] == {**FAST, labels[0]: EXACT, labels[1]: {"batch": 100}}
+    assert doc["surge_defaults"] == small_run["surge_defaults"]
+    assert read_results(path) == doc and upgrade(doc) == doc  # read twice, brought up to date once
+
+    grid = dict(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle", *labels])
+    today = EvalConfig(**grid, policy_options=FAST)
+    assert {label for rows in borrowable(today, doc).values() for label in rows} == {"greedy", "ia", "oracle"}
+    pinned = EvalConfig(**grid, policy_options={**FAST, labels[0]: EXACT, labels[1]: {"batch": 100}})
+    assert all(set(rows) >= set(labels) for rows in borrowable(pinned, doc).values())
+    with pytest.raises(DataError, match="was written with policy_options="):
+        evaluate(today, progress=lambda _msg: None, checkpoint=path, resume=True)
 
 
 def test_instances_draw_their_own_rollout_seed() -> None:

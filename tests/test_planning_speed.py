@@ -15,6 +15,7 @@ from city.forecast import Forecast
 from agents.base import make_policy
 from agents.rollout import DemandTables, RolloutConfig, Shortcuts, plan_agent, prepare_step
 from agents.rollout_config import default_prune
+from agents.rollout_policy import EXACT
 from agents.waves import plan_waves
 from city.graph import City
 from city.scenario import load_city
@@ -114,20 +115,23 @@ def test_approximations_are_deterministic_for_a_seed(city: City, approx: dict) -
     assert runs[0] == runs[1]
 
 
-@pytest.mark.parametrize("base", ["greedy", "ia"])
-def test_waves_match_sequential_turns(city: City, base: str) -> None:
-    extra = {} if base == "greedy" else {"scope": "map", "ce": "standard"}
+@pytest.mark.parametrize(("name", "options", "approx"), [
+    ("surge", EXACT, {}),
+    ("surge", {"batch": 16}, {"adaptive": 2.0, "batch": 16, "cap": 24}),  # surge's default approximations, in several batches
+    ("garces2023", {}, {}),
+])
+def test_waves_match_sequential_turns(city: City, name: str, options: dict, approx: dict) -> None:
+    extra = {} if name == "surge" else {"base": "ia", "scope": "map", "ce": "standard"}
     obs = seeded_state(city, 7, taxis=80)
     fc = forecast(city, np.random.default_rng(7))
-    config = RolloutConfig(horizon=H, samples=SAMPLES, prune=default_prune(H), base=base, seed=1, **extra)
+    config = RolloutConfig(horizon=H, samples=SAMPLES, prune=default_prune(H), seed=1, **extra, **approx)
     ctx = prepare_step(city, config, obs, DemandTables.build(city, fc, config.ce, config.seed), obs.t % 60)
     sequential = ctx.base_controls.copy()
     for agent in np.flatnonzero(obs.tau == 0):
         sequential[agent] = plan_agent(ctx, sequential[:agent], int(agent))
     waves = plan_waves(city, obs, config.prune)
     assert waves.critical_path < waves.agents.size  # some agents do plan side by side
-    policy = make_policy("surge" if base == "greedy" else "garces2023", city, forecast="true-rate", workers=2,
-                         horizon=H, samples=SAMPLES, seed=1, **extra)
+    policy = make_policy(name, city, forecast="true-rate", workers=2, horizon=H, samples=SAMPLES, seed=1, **options)
     assert policy.config == config
     u = ctx.base_controls.copy()
     policy._act_waves(ctx, u)

@@ -107,6 +107,24 @@ def test_option_strings_are_parsed_to_their_declared_types() -> None:
     assert parse_policy("oracle-auction:window=0")[1] == {"window": 0}
 
 
+def test_surge_plans_with_its_approximations_by_default_and_exactly_when_they_are_off() -> None:
+    from agents.base import parse_policy, policy_class
+    from agents.rollout_config import RolloutConfig, default_prune
+    from agents.rollout_policy import EXACT, pinned_options
+
+    surge, garces = policy_class("surge"), policy_class("garces2023")
+    c = surge.rollout_config()
+    assert (c.adaptive, c.batch, c.cap) == (2.0, 50, 24)
+    exact = RolloutConfig(prune=default_prune(10))
+    assert surge.rollout_config(**EXACT) == exact
+    assert surge.rollout_config(**parse_policy("surge:adaptive=none,cap=none,batch=100")[1]) == exact
+    off = surge.rollout_config(cap=None)  # each approximation is turned off on its own
+    assert (off.adaptive, off.batch, off.cap) == (2.0, 50, None)
+    assert garces.rollout_config() == garces.rollout_config(**EXACT)
+    assert pinned_options("surge:cap=12,forecast=true-rate") == {"adaptive": None, "batch": 100}
+    assert pinned_options("garces2023") == pinned_options("greedy") == {}
+
+
 def test_every_policy_declares_exactly_the_options_its_constructor_takes() -> None:
     import inspect
 

@@ -106,6 +106,29 @@ def test_the_pruning_ablation_runs_at_one_sample_count_pruned_and_unpruned() -> 
     assert pruning_pairs(replace(QUICK, samples=20)) == [("surge:prune=none", "surge"), ("garces2023:prune=none", "garces2023")]
 
 
+def test_the_protocol_plans_every_surge_label_exactly_and_resumes_the_committed_reports(tmp_path: Path) -> None:
+    """surge's default approximations stay out of the paper's protocol, and the committed reports' rows still count as its own."""
+    from agents.base import parse_policy, policy_class
+    from coordinator.evaluate import read_results
+    from coordinator.reproduce import ABLATIONS, FULL, MAIN_POLICIES, QUICK, Run, _policy_options, pruning_pairs
+
+    run = Run(out=tmp_path, scenario="synthetic", data=None, protocol=FULL)
+    labels = [*MAIN_POLICIES, *ABLATIONS, *(label for pair in pruning_pairs(FULL) for label in pair)]
+    options = _policy_options(run, labels)
+    for label in labels:
+        name, own = parse_policy(label)
+        if name not in ("surge", "garces2023"):
+            continue
+        planner = {k: v for k, v in {**options.get(label, {}), **own}.items() if k not in ("forecast", "model")}
+        config = policy_class(name).rollout_config(**planner)
+        assert config.adaptive is None and config.cap is None, label
+    for part in ("main", "ablation"):
+        doc = read_results(Path(__file__).parents[1] / "benchmarks" / "reproduce-quick-synthetic-intel" / f"results-{part}.json")
+        model = next(o["model"] for o in doc["config"]["policy_options"].values() if "model" in o)
+        quick = Run(out=tmp_path, scenario="synthetic", data=None, protocol=QUICK, model_dir=Path(model))
+        assert _policy_options(quick, [*doc["config"]["policies"], "oracle"]) == doc["config"]["policy_options"], part
+
+
 def _row(step_policy: str, seed: int, seconds: float, machine: str | None) -> dict:
     row = {"date": "2022-11-17", "hour": 19, "seed": seed, "policy": step_policy, "plan_seconds_per_step": seconds}
     if machine:
