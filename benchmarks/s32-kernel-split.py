@@ -5,7 +5,7 @@ three ways: every candidate in play (as planned), the first candidate alone,
 and none (the samples are still drawn).  The least of ``--rounds`` replays of
 each bounds what a saving on the later candidates can give.
 
-    PYTHONPATH=.:benchmarks python benchmarks/s32-kernel-split.py --label surge --data ../shared/data
+    PYTHONPATH=.:benchmarks python benchmarks/s32-kernel-split.py --label surge:adaptive=none,cap=none --data ../shared/data
 """
 
 from __future__ import annotations

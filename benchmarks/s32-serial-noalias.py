@@ -8,7 +8,7 @@ of its own, and then replays the captured calls of ``--label`` on one kernel
 thread with the serial kernel and with the parallel one.  If the flag were
 the cause, the serial kernel would catch up.
 
-    PYTHONPATH=.:benchmarks python benchmarks/s32-serial-noalias.py --label surge --data ../shared/data [--noalias]
+    PYTHONPATH=.:benchmarks python benchmarks/s32-serial-noalias.py --label surge:adaptive=none,cap=none --data ../shared/data [--noalias]
 """
 
 from __future__ import annotations
