@@ -317,10 +317,12 @@ def bench_plan(args: argparse.Namespace) -> int:
                   f"settled {statistics.mean(rec['settled_share']):5.1%} of decisions, "
                   f"{statistics.mean(rec['shadow_share']):5.1%} of candidate samples  {same}", flush=True)
     pol = out["policies"]
-    if "surge" in pol and "garces2023" in pol:
-        ratio = pol["garces2023"]["plan_seconds_per_step"]["median"] / pol["surge"]["plan_seconds_per_step"]["median"]
-        out["garces2023_over_surge"] = ratio
-        print(f"garces2023 / surge median time ratio: {ratio:.2f}")
+    if "garces2023" in pol:
+        for label in (p for p in pol if parse_policy(p)[0] == "surge"):
+            ratio = pol["garces2023"]["plan_seconds_per_step"]["median"] / pol[label]["plan_seconds_per_step"]["median"]
+            out.setdefault("garces2023_over", {})[label] = ratio
+            print(f"garces2023 / {label} median time ratio: {ratio:.2f} ({label}: {pol[label]['approximations']}; "
+                  f"garces2023: {pol['garces2023']['approximations']})")
     c = out["city"]
     print(f"{args.scenario}: {c['intersections']} intersections, {args.taxis} taxis, H={args.horizon}, {args.samples} samples, "
           f"{args.date} {args.hour}:00 + {args.warmup} min, {os.cpu_count()} cpus, {args.workers} planning worker(s)")

@@ -151,6 +151,8 @@ def test_bench_plan_reports_variants_side_by_side(tmp_path: Path) -> None:
     assert res["variants"]["all"]["hashes"] == res["variants"]["none"]["hashes"] == res["variants"]["with-minute_lists"]["hashes"]
     assert len(res["free_taxis"]) == len(res["critical_path"]) == len(res["seconds_per_free_taxi"]) == 2
     assert "ms per free taxi" in proc.stdout and "same decisions" in proc.stdout
+    assert res["approximations"] == "adaptive=2 in batches of 50, cap=24" and res["rollout"]["cap"] == 24
+    assert "surge (adaptive=2 in batches of 50, cap=24): free taxis" in proc.stdout
     bad = run_cli("bench", "plan", "--variants", "no-magic")
     assert bad.returncode != 0 and "unknown variant 'no-magic'" in bad.stderr
 
