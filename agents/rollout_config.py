@@ -88,8 +88,11 @@ class RolloutConfig:
 
     def approximations(self) -> str:
         """The approximations in words, for tables and logs (``"adaptive=2 in batches of 50, cap=24"``), or ``"exact"``."""
-        parts = ([f"adaptive={self.adaptive:g} in batches of {self.batch}"] if self.adaptive is not None else []) + \
-                ([f"cap={self.cap}"] if self.cap is not None else [])
+        parts = []
+        if self.adaptive is not None:
+            parts.append(f"adaptive={self.adaptive:g} in batches of {self.batch}")
+        if self.cap is not None:
+            parts.append(f"cap={self.cap}")
         return ", ".join(parts) or "exact"
 
 
