@@ -221,11 +221,15 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
 
     ``synthetic`` generates everything.  A scenario file's world replays its
     trip records (``[[trips]] kind = "fhvhv"``) with its events when it has
-    them.  Otherwise it is synthesised on the real map: its base demand and β
-    come from a zone-OD profile (``kind = "zone-od"``, e.g. the real
-    Manhattan profile of ``nyc``) when it names one, with synthetic weather
-    effects, holidays and event surges on top; weather and points of interest
-    come from its files when it names them.  ``share`` (default
+    them.  Otherwise it is synthesised on the real map: with real hourly
+    trip totals (``kind = "hourly-totals"``) its base demand is each hour's
+    real level, split over sectors by its zone-OD profile and zone-hourly
+    counts (:mod:`city.demand.real_level`), with event surges above the usual
+    event level; without them its base demand and β come from a zone-OD
+    profile (``kind = "zone-od"``, e.g. the real Manhattan profile of ``nyc``)
+    when it names one, with synthetic weather effects, holidays and event
+    surges on top; weather and points of interest come from its files when it
+    names them.  ``share`` (default
     ``$SURGE_SHARE``) overrides the file's share of its trips; on a
     synthesised world it scales base demand and event trips (default
     :data:`city.demand.profile.FLEET_SHARE`).
@@ -246,9 +250,11 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
 def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int = 0, share: float | None = None) -> object:
     """The demand world of a scenario file on its city.
 
-    The first ``[[trips]]`` entry with files is used; ``share`` (a command's
-    ``--share``) overrides its ``share``.  The file's ``[holidays]`` and
-    ``[occupancy]`` schedules go into the world.
+    The first ``fhvhv`` or ``zone-od`` entry with files is used, with the
+    first ``hourly-totals`` and ``zone-hourly`` entries with files (trip
+    records are replayed as they are, without them); ``share`` (a command's
+    ``--share``) overrides the entries' ``share``.  The file's ``[holidays]``
+    and ``[occupancy]`` schedules go into the world.
     """
     from city.demand import RecordedWorld, synthetic_world
     from city.demand.profile import FLEET_SHARE
@@ -268,7 +274,19 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
         from city.poi import read_poi_csv
 
         pois = read_poi_csv(spec.pois.file, borough=spec.pois.borough, types=spec.pois.types)
-    trips = next((t for t in spec.trips if t.files), None)
+    trips = next((t for t in spec.trips if t.files and t.kind in ("fhvhv", "zone-od")), None)
+    hourly = next((t for t in spec.trips if t.files and t.kind == "hourly-totals"), None)
+    if hourly is not None and (trips is None or trips.kind == "zone-od"):
+        from city.io.hourly_totals import read_hourly_totals
+        from city.io.zone_hourly import read_zone_hourly
+
+        zonal = next((t for t in spec.trips if t.files and t.kind == "zone-hourly"), None)
+        return synthetic_world(
+            city, year=year, seed=seed, weather=weather, pois=pois, share=share or hourly.share,
+            zone_profile=load_zone_profile(trips.files[0], city) if trips is not None else None,
+            hourly_totals=read_hourly_totals(hourly.files[0], columns=hourly.columns),
+            zone_hourly=read_zone_hourly(zonal.files[0], columns=zonal.columns, timezone=spec.timezone) if zonal is not None else None,
+            **calendar)
     if trips is not None and trips.kind == "zone-od":
         profile = load_zone_profile(trips.files[0], city)
         return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, zone_profile=profile,

@@ -28,7 +28,9 @@ from city.occupancy import LOCALE_TYPES
 
 DATA_PREFIX = "${data}/"
 ZONE_MISSING = ("error", "skip")
-TRIP_KINDS = ("fhvhv", "zone-od")
+TRIP_KINDS = ("fhvhv", "zone-od", "hourly-totals", "zone-hourly")
+#: Logical columns of the table kinds, which ``columns`` may rename to the file's.
+TRIP_COLUMNS = {"hourly-totals": ("date", "hour", "count"), "zone-hourly": ("time", "zone", "count")}
 EVENT_KINDS = ("permitted", "listing")
 WEATHER_COLUMNS = ("time", "temp_f", "precip_in", "wind_mph")
 
@@ -77,17 +79,20 @@ class PoiSpec:
 
 @dataclass(frozen=True)
 class TripsSpec:
-    """Trip records (``fhvhv`` parquet files) or a zone-OD profile, and the fleet's ``share`` of them.
+    """Trip records (``fhvhv`` parquet files), a zone-OD profile, hourly totals or zone-hourly counts, and the fleet's ``share``.
 
     ``share`` ``None`` leaves it to the world (all recorded trips; the
-    world's default share of a profile).  ``optional``: no matching file is
-    not an error (the next entry, or a synthesised demand, is used).
+    world's default share of a profile or of hourly totals).  ``optional``:
+    no matching file is not an error (the next entry, or a synthesised
+    demand, is used).  ``columns`` maps a table kind's logical columns
+    (:data:`TRIP_COLUMNS`) to the file's names.
     """
 
     kind: str
     files: tuple[Path, ...]
     share: float | None
     optional: bool
+    columns: dict[str, str] | None = None
 
 
 @dataclass(frozen=True)
@@ -322,7 +327,12 @@ def _occupancy(r: _Reader, doc: dict) -> Path | None:
 
 
 def _trips(r: _Reader, doc: dict) -> tuple[TripsSpec, ...]:
-    """``[trips]``, or ``[[trips]]`` entries in order of preference (the world uses the first whose files exist)."""
+    """``[trips]``, or ``[[trips]]`` entries.
+
+    Of ``fhvhv`` and ``zone-od`` the world uses the first whose files exist;
+    ``hourly-totals`` and ``zone-hourly`` go with a ``zone-od`` profile (or the
+    synthetic split), not instead of it (see :func:`city.scenario.build_world`).
+    """
     value = doc.get("trips")
     if value is None:
         return ()
@@ -334,7 +344,7 @@ def _trips(r: _Reader, doc: dict) -> tuple[TripsSpec, ...]:
 
 
 def _trip_entry(r: _Reader, t: dict, key: str) -> TripsSpec:
-    r.known(t, key, ("kind", "files", "share", "optional"))
+    r.known(t, key, ("kind", "files", "share", "optional", "columns"))
     kind = r.get(t, key, "kind", str, required=True)
     if kind not in TRIP_KINDS:
         raise r.fail(f"{key}.kind", f"{kind!r} is not one of {', '.join(TRIP_KINDS)}")
@@ -353,7 +363,18 @@ def _trip_entry(r: _Reader, t: dict, key: str) -> TripsSpec:
     share = r.get(t, key, "share", (int, float))
     if share is not None and not 0.0 < float(share) <= 1.0:
         raise r.fail(f"{key}.share", f"{share!r} is not a share in (0, 1]")
-    return TripsSpec(kind=kind, files=tuple(files), share=None if share is None else float(share), optional=optional)
+    columns = r.get(t, key, "columns", dict)
+    if columns is not None:
+        if kind not in TRIP_COLUMNS:
+            raise r.fail(f"{key}.columns", f"only {' and '.join(TRIP_COLUMNS)} tables take columns")
+        r.known(columns, f"{key}.columns", TRIP_COLUMNS[kind])
+        for k in columns:
+            r.get(columns, f"{key}.columns", k, str)
+    if kind == "zone-hourly" and share is not None:
+        raise r.fail(f"{key}.share", "zone-hourly counts only split demand over zones; give the share with the hourly totals")
+    if kind in TRIP_COLUMNS and len(files) > 1:
+        raise r.fail(f"{key}.files", f"a {kind} table is one file; {len(files)} match")
+    return TripsSpec(kind=kind, files=tuple(files), share=None if share is None else float(share), optional=optional, columns=columns)
 
 
 def _events(r: _Reader, doc: dict) -> EventsSpec | None:

@@ -75,6 +75,8 @@ class RecordedWorld(DemandWorld):
 
         self._counts = counts
         self._counts.setflags(write=False)
+        #: What the demand is made of, recorded in results files.
+        self.demand_source = f"trip records, {len(trips)} trips"
         self._rate = counts.astype(np.float64)
         self._rate.setflags(write=False)
         self._beta = od_matrix(trips, S)

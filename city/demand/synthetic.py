@@ -3,7 +3,8 @@
 Base demand per sector-hour is the real citywide profile
 (:mod:`city.demand.profile`) spread over sectors by their intensity, or, on
 a real map with a zone profile, the real per-sector rates and β scaled by
-``share``.  Events come on top (:mod:`city.demand.attendance`): arrivals
+``share``, or, with a city's real hourly trip totals, the real level of every
+hour split over sectors (:mod:`city.demand.real_level`).  Events come on top (:mod:`city.demand.attendance`): arrivals
 before an event are trips that *end* at its venue, their pickups spread over
 the map by the origin–destination model (where trips to the venue's sector
 come from); departures after its end are pickups *at* the venue, going back
@@ -14,15 +15,17 @@ from __future__ import annotations
 
 import datetime as dt
 import random
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from city.demand.attendance import draw_attendance, event_trips, surges, write_events
 from city.demand.climate import synthetic_weather
-from city.demand.dates import HOLIDAY_COUNTRY, day_kind
+from city.demand.dates import HOLIDAY_COUNTRY, day_kind, holiday_dates
 from city.demand.geography import busyness, find_anchors, gravity_od, intensity_and_tilt, locale_counts
-from city.demand.profile import FLEET_SHARE, base_rate, profile_base_rate
+from city.demand.profile import FLEET_SHARE, TILT, base_rate, profile_base_rate
+from city.demand.real_level import BASE_FLOOR, day_kinds, default_share, real_base, sector_split
 from city.demand.venues import make_venues, schedule
 from city.demand.world import DemandWorld, HourTrips, check_seed_year
 from city.errors import ConfigError
@@ -31,6 +34,8 @@ from city.poi import Pois
 from city.weather import HourlyWeather
 
 if TYPE_CHECKING:
+    from city.io.hourly_totals import HourlyTotals
+    from city.io.zone_hourly import ZoneHourly
     from city.trips import ZoneProfile
 
 
@@ -40,7 +45,9 @@ class SyntheticWorld(DemandWorld):
     Extra attributes: ``anchors`` (sector of the theatre district, arena,
     convention centre and festival park), ``intensity`` (each sector's share
     of base demand), ``demand_scale``, ``share`` (of a zone profile's real
-    counts) and ``base_source``.
+    counts, or of the real hourly totals), ``base_source`` (what the base
+    demand is made of, in words) and ``demand_source`` (the same, recorded
+    in results files).
 
     Parameters
     ----------
@@ -58,10 +65,18 @@ class SyntheticWorld(DemandWorld):
         Multiplies all demand (base and surges); 1.0 is calibrated for 100 taxis.
     zone_profile : ZoneProfile, optional
         Real zone-to-zone trip rates (:func:`city.trips.read_zone_profile`) for the base demand and β.
-    share : float
+    share : float, optional
         The fleet's share of the real market (default :data:`~city.demand.profile.FLEET_SHARE`, ≈ 1.7 %):
         it scales the zone profile's trips, or the real profile's 19 h level on a map without one,
-        and the event-goers' trips.
+        and the event-goers' trips.  With ``hourly_totals`` it scales the real totals, and the default
+        is :func:`~city.demand.real_level.default_share`.
+    hourly_totals : HourlyTotals, optional
+        The city's real trips of every hour of ``year`` (:func:`city.io.hourly_totals.read_hourly_totals`):
+        the base demand is then the real level of each hour (:mod:`city.demand.real_level`); weather
+        then only moves event attendance.
+    zone_hourly : ZoneHourly, optional
+        Real trips per zone and hour (:func:`city.io.zone_hourly.read_zone_hourly`) for the weekend and
+        holiday split of ``hourly_totals``.
     holidays : (country, subdivision)
         Whose public holidays run on a Sunday profile (the ``holidays`` package); US federal by default.
     schedules : dict, optional
@@ -78,13 +93,18 @@ class SyntheticWorld(DemandWorld):
         pois: Pois | None = None,
         demand_scale: float = 1.0,
         zone_profile: "ZoneProfile | None" = None,
-        share: float = FLEET_SHARE,
+        share: float | None = None,
         holidays: tuple[str, str | None] = (HOLIDAY_COUNTRY, None),
         schedules: dict | None = None,
+        hourly_totals: "HourlyTotals | None" = None,
+        zone_hourly: "ZoneHourly | None" = None,
     ) -> None:
         check_seed_year(seed, year)
         if not demand_scale > 0:
             raise ConfigError(f"demand_scale must be positive, got {demand_scale}")
+        totals = hourly_totals.year(year) if hourly_totals is not None else None
+        if share is None:
+            share = FLEET_SHARE if totals is None else default_share(totals, day_kinds(year, holiday_dates(year, *holidays)), year)
         if not 0 < share <= 1:
             raise ConfigError(f"share must be in (0, 1], got {share}")
         notes: list[str] = []
@@ -102,6 +122,8 @@ class SyntheticWorld(DemandWorld):
         events, specs = write_events(specs, venues, random.Random(f"surge-texts-{seed}"))
         events, attendance = draw_attendance(specs, events, venues, weather, seed)
         super().__init__(city, year, seed, venues, events, weather, counts, pois, notes, holidays=holidays, schedules=schedules)
+        self._real_totals: np.ndarray | None = None
+        self.hourly_totals_source = None if hourly_totals is None else hourly_totals.source
 
         S = city.n_sectors
         if zone_profile is not None:
@@ -121,7 +143,6 @@ class SyntheticWorld(DemandWorld):
             self._profile_beta = None
             self._static_beta = gravity_od(city, self.intensity)
             self.base_source = f"real hourly profile (city.demand.profile.PROFILE) × share {self.share:g} × sector intensity"
-        self._base.setflags(write=False)
         # p(pickup sector | trip ends in sector v): where trips to v come from (base flows into v).
         # A sector no trip ends in (possible in a sparse zone profile) draws its visitors locally.
         inflow = self.intensity[:, None] * self._static_beta
@@ -129,11 +150,43 @@ class SyntheticWorld(DemandWorld):
         self._origin = np.where(into > 0, inflow / np.where(into > 0, into, 1.0), np.eye(S)).T
         trips_arr, trips_dep = event_trips(self.events, attendance, weather)
         self._arrivals, self._departures, self._event_rows = surges(self.events, trips_arr, trips_dep, year, S, self.share * self.demand_scale)
+        if totals is not None:
+            self._real_level(totals, zone_profile, zone_hourly, tilt, notes)
+        parts = [f"hourly-totals {self.hourly_totals_source}"] if totals is not None else []
+        parts += [f"zone-od {Path(zone_profile.source).name}"] if zone_profile is not None else []
+        parts += [f"zone-hourly {zone_hourly.source}"] if totals is not None and zone_hourly is not None else []
+        self.demand_source = f"{' + '.join(parts or ['synthetic profile'])}, share {self.share:g}"
+        self._base.setflags(write=False)
         self._rate = self._base + self._arrivals @ self._origin + self._departures
         self._rate.setflags(write=False)
         self._counts: np.ndarray | None = None
 
+    def _real_level(self, totals: np.ndarray, zone_profile: "ZoneProfile | None", zone_hourly: "ZoneHourly | None",
+                    tilt: np.ndarray, notes: list[str]) -> None:
+        """Base demand at each hour's real total (see :mod:`city.demand.real_level`), replacing the profile's."""
+        kinds = day_kinds(self.year, self.holidays)
+        by_type = zone_hourly.by_day_type(self.city.sector_ids, self.holidays)[0] if zone_hourly is not None else None
+        synthetic = self.intensity[None, :] * (1.0 + tilt[None, :] * TILT[:, None])
+        split = sector_split(zone_profile.rate() if zone_profile is not None else None, by_type, synthetic)
+        events = (self._arrivals.sum(axis=1) + self._departures.sum(axis=1)) / self.demand_scale
+        base, floored = real_base(totals, self.share, split, kinds, events)
+        self._base = base * self.demand_scale
+        self._real_totals = totals
+        by = ("zone profile " + Path(zone_profile.source).name) if zone_profile is not None else None
+        weekend = f"its weekday mean × weekend ratios of {zone_hourly.source}" if zone_hourly is not None and by else \
+            (f"zone counts {zone_hourly.source}" if zone_hourly is not None else "the synthetic sector intensity")
+        self.base_source = (f"real hourly totals {self.hourly_totals_source} × share {self.share:g} less the usual event trips, split by "
+                            + (f"{by} (weekends and holidays: {weekend})" if by else weekend))
+        notes[:] = [n for n in notes if not n.startswith("base demand:")]
+        notes.append(f"base demand: {self.base_source}")
+        if floored:
+            notes.append(f"base demand: {floored} hours kept at {BASE_FLOOR:g} of their real total (usual event trips above the rest)")
+
     # ------------------------------------------------------------ rates
+    def real_level(self) -> np.ndarray | None:
+        """``(hours_in_year,)`` real total × share × demand scale of every hour, or ``None`` without hourly totals."""
+        return None if self._real_totals is None else self._real_totals * self.share * self.demand_scale
+
     def base_rate(self) -> np.ndarray:
         """``(hours_in_year, S)`` expected requests without event surges."""
         return self._base
