@@ -17,6 +17,11 @@ before ``surge`` planned with approximations by default (they have no
 ``surge_defaults`` field) are read with the exact settings they planned with
 pinned in every ``surge`` label's options (:func:`pin_surge_defaults`), so
 that a run of today's defaults never resumes from, or borrows, their rows.
+Results files record the world's ``demand_source`` (e.g. the real hourly
+totals and zone profile it was built from, and the share); a run resumes
+from, or borrows, rows of the same demand source only.  A file without the
+field was written before real hourly totals could be used: it counts as
+:data:`UNRECORDED_SOURCE`, which only a world without hourly totals accepts.
 
 A policy is named as in the registry, optionally with options:
 ``surge:forecast=true-rate,samples=500``; the whole string labels its rows,
@@ -52,6 +57,8 @@ from city.sim import EpisodeResult, FleetSim, Requests
 
 RESULTS_SCHEMA = "surge.results/1"
 ORACLES = ("oracle", "oracle-auction")
+#: The demand source of a results file written before the field existed.
+UNRECORDED_SOURCE = "not recorded (written before real hourly totals)"
 METRICS = ("total_cost", "outstanding_end", "served", "wait_overhead_per_served", "plan_seconds_per_step")
 
 
@@ -169,7 +176,8 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
         for done in [p for p in results if p in cfg.policies and p not in known]:
             known[done] = _row(date_text, hour, seed, done, results[done], *oracles, greedy)
             if keep_to is not None:
-                write_json({"config": asdict(cfg), "surge_defaults": surge_defaults(), "row": known[done]},
+                write_json({"config": asdict(cfg), "surge_defaults": surge_defaults(),
+                            "demand_source": demand_source(_scenario_cache(cfg).world), "row": known[done]},
                            Path(keep_to) / _episode_file(date_text, hour, seed, done))
     return [dict(known[name]) for name in cfg.policies]
 
@@ -225,7 +233,8 @@ def kept_episodes(cfg: EvalConfig, folder: Path, warn: Callable[[str], None]) ->
     for path in sorted(folder.glob("*.json")) if folder.is_dir() else []:
         try:
             saved = json.loads(path.read_text())
-            doc = {"config": pin_surge_defaults(saved["config"], saved.get("surge_defaults")), "episodes": [saved["row"]]}
+            doc = {"config": pin_surge_defaults(saved["config"], saved.get("surge_defaults")), "episodes": [saved["row"]],
+                   **({"demand_source": saved["demand_source"]} if "demand_source" in saved else {})}
             missing = _missing_field(saved["row"], ("date", *_EPISODE_FIELDS))
             if missing:
                 raise KeyError(missing)
@@ -281,11 +290,28 @@ def borrowable(cfg: EvalConfig, doc: dict) -> dict[tuple[str, int, int], dict[st
     theirs = doc["config"]
     if any(getattr(cfg, k) != theirs.get(k) for k in _SAME_EPISODES):
         return {}
+    if not same_demand(recorded_source(doc), demand_source(_scenario_cache(cfg).world)):
+        return {}
     opts = theirs.get("policy_options", {})
     if any(cfg.policy_options.get(o) != opts.get(o) for o in ORACLES):
         return {}
     labels = {p for p in cfg.policies if p in theirs.get("policies", []) and cfg.policy_options.get(p) == opts.get(p)}
     return _by_instance(e for e in doc["episodes"] if e["policy"] in labels)
+
+
+def demand_source(world: object) -> str:
+    """What a world's demand is made of, as results files record it."""
+    return str(getattr(world, "demand_source", type(world).__name__))
+
+
+def recorded_source(doc: dict) -> str:
+    """The demand source a results document records (:data:`UNRECORDED_SOURCE` for one written before the field)."""
+    return str(doc.get("demand_source", UNRECORDED_SOURCE))
+
+
+def same_demand(recorded: str, current: str) -> bool:
+    """Whether rows recorded under ``recorded`` are rows of a world of ``current`` demand source."""
+    return recorded == current or (recorded == UNRECORDED_SOURCE and not current.startswith("hourly-totals"))
 
 
 def _by_instance(episodes: Iterable[dict]) -> dict[tuple[str, int, int], dict[str, dict]]:
@@ -373,6 +399,9 @@ def load_finished(cfg: EvalConfig, path: str | Path) -> list[dict]:
     theirs = {k: v for k, v in doc.get("config", {}).items() if k not in _RESUME_FREE}
     if doc.get("reference_oracle") != "oracle":
         raise DataError("was written when 'oracle' was the auction; use another --json", path=path)
+    ours = demand_source(_scenario_cache(cfg).world)
+    if not same_demand(recorded_source(doc), ours):
+        raise DataError(f"was written with demand source {recorded_source(doc)!r}, this run has {ours!r}; use another --json", path=path)
     old = theirs.get("policies", [])
     if set(old) <= set(mine["policies"]):
         theirs["policies"] = mine["policies"]
@@ -441,6 +470,7 @@ def evaluate(
             "scenario": cfg.scenario,
             "reference_oracle": "oracle",
             "surge_defaults": surge_defaults(),
+            "demand_source": demand_source(scen.world),
             "city": scen.city.summary(),
             "config": asdict(cfg),
             "episodes": sorted(episodes + [e for rows in pending.values() for e in rows.values()], key=lambda e: order[instance_key(e)]),
