@@ -175,7 +175,7 @@ def test_no_events_the_expected_total_is_the_scaled_real_count() -> None:
     totals = year_counts()
     kinds = day_kinds(2022, frozenset())
     split = sector_split(None, None, np.full((24, 3), 1 / 3))
-    base, floored = real_base(totals, 0.02, split, kinds, np.zeros(H))
+    base, floored = real_base(totals, 0.02, split, kinds, np.zeros(H), kinds)
     assert floored == 0
     np.testing.assert_allclose(base.sum(axis=1), totals * 0.02)
 
@@ -187,7 +187,7 @@ def test_events_count_only_above_their_usual_level() -> None:
     events[np.arange(19, H, 24)] = 2.0  # every evening at 19 h
     events[(dt.date(2022, 11, 17).timetuple().tm_yday - 1) * 24 + 19] = 30.0  # and a surge
     split = sector_split(None, None, np.full((24, 3), 1 / 3))
-    base, _ = real_base(totals, 0.02, split, kinds, events)
+    base, _ = real_base(totals, 0.02, split, kinds, events, kinds)
     expected = base.sum(axis=1) + events
     usual = usual_by_kind_hour(events, kinds)
     np.testing.assert_allclose(expected, totals * 0.02 + events - usual)
@@ -224,7 +224,8 @@ def test_world_level_is_the_files_count_times_share(tmp_path: Path, city, profil
     kinds = day_kinds(2022, w.holidays)
     events = w.event_rate().sum(axis=1)
     level = counts * 0.05
-    base = np.maximum(level - usual_by_kind_hour(events, kinds), BASE_FLOOR * level)  # the tiny city's events are large
+    weekdays = day_kinds(2022, frozenset())  # the usual event level is per weekday: the calendar ignores holidays
+    base = np.maximum(level - usual_by_kind_hour(events, weekdays), BASE_FLOOR * level)  # the tiny city's events are large
     np.testing.assert_allclose(w.expected_rate().sum(axis=1), base + events, rtol=1e-9)
     business = w.base_rate()[w.hour_index(dt.datetime(2022, 3, 8, 9))]  # a Tuesday: the profile's Tuesday 9 h shares
     np.testing.assert_allclose(business / business.sum(), profile.rate()[1, 9] / profile.rate()[1, 9].sum())

@@ -12,11 +12,11 @@ real total of an hour already holds the demand of the real events of that
 hour.  So the real total is read as *base + usual events*: the world's
 expected requests of an hour are ``total × share + E(h) − Ē(kind, hour)``,
 where ``E(h)`` is the world's event trips that hour and ``Ē`` their mean over
-the year's days of the same day kind (Monday … Sunday, holidays as Sunday)
-and hour.  Surges then count only above the usual event level, a quiet hour
-sits a little below its real total, and over the year the expected requests
-of each day kind and hour sum to the real totals × share exactly (unless the
-floor below binds).  A world without events gives each hour's real total ×
+the year's days of the same weekday and hour (the synthetic calendar
+schedules events by weekday, holidays included).  Surges then count only
+above the usual event level, a quiet hour sits a little below its real
+total, and over the year the expected requests of each weekday and hour sum
+to the real totals × share exactly (unless the floor below binds).  A world without events gives each hour's real total ×
 share.
 
 Split.  Business days use the zone profile's pickup shares of their weekday
@@ -48,7 +48,7 @@ REFERENCE_MONTHS = range(1, 7)
 
 
 def day_kinds(year: int, holidays: frozenset[dt.date]) -> np.ndarray:
-    """``(days,)`` profile row of every day of ``year``: 0 … 6 = Monday … Sunday, holidays 6."""
+    """``(days,)`` profile row of every day of ``year``: 0 … 6 = Monday … Sunday, holidays 6 (``frozenset()``: the weekdays)."""
     days = (dt.date(year + 1, 1, 1) - dt.date(year, 1, 1)).days
     return np.array([day_kind(dt.date(year, 1, 1) + dt.timedelta(days=d), holidays) for d in range(days)], dtype=np.int64)
 
@@ -99,15 +99,17 @@ def usual_by_kind_hour(values: np.ndarray, kinds: np.ndarray) -> np.ndarray:
 
 
 def real_base(totals: np.ndarray, share: float, split: np.ndarray, kinds: np.ndarray,
-              event_trips: np.ndarray) -> tuple[np.ndarray, int]:
+              event_trips: np.ndarray, weekdays: np.ndarray) -> tuple[np.ndarray, int]:
     """``(hours, S)`` base demand: (real total × share − usual event trips) split over sectors, and the hours floored.
 
+    ``kinds`` ``(days,)`` pick the split's rows (:func:`day_kinds`);
     ``event_trips`` ``(hours,)`` are the world's expected event requests per
-    hour (already × share); the base of an hour keeps at least
+    hour (already × share), their usual level taken per ``weekdays``
+    ``(days,)`` and hour; the base of an hour keeps at least
     :data:`BASE_FLOOR` of its real total × share.
     """
     level = totals * share
-    base = level - usual_by_kind_hour(event_trips, kinds)
+    base = level - usual_by_kind_hour(event_trips, weekdays)
     floor = BASE_FLOOR * level
     floored = int((base < floor).sum())
     base = np.maximum(base, floor)

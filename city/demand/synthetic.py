@@ -169,7 +169,7 @@ class SyntheticWorld(DemandWorld):
         synthetic = self.intensity[None, :] * (1.0 + tilt[None, :] * TILT[:, None])
         split = sector_split(zone_profile.rate() if zone_profile is not None else None, by_type, synthetic)
         events = (self._arrivals.sum(axis=1) + self._departures.sum(axis=1)) / self.demand_scale
-        base, floored = real_base(totals, self.share, split, kinds, events)
+        base, floored = real_base(totals, self.share, split, kinds, events, day_kinds(self.year, frozenset()))
         self._base = base * self.demand_scale
         self._real_totals = totals
         by = ("zone profile " + Path(zone_profile.source).name) if zone_profile is not None else None
