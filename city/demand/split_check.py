@@ -9,6 +9,8 @@ across sectors and the mean absolute share error (mean over sectors of
   uses on business days), against real business days;
 * ``synthetic``: the synthetic map's sector intensity and evening tilt (the
   split of a map without a zone profile), against real business days;
+* the yellow file's own first-half shares against its second half: how
+  consistent the real split is, and how large its weekend shift is;
 * on weekends (Saturdays, Sundays and holidays): the weekday-mean profile
   shares (the split without a zone-hourly file) and the scenario's weekend
   split (weekday mean × weekend ratio), the ratio taken from the first half of
@@ -83,7 +85,11 @@ def check_split(data_dir: Path | str) -> dict:
         "days": {"saturday": int(late_days[1]), "sunday_or_holiday": int(late_days[2])},
         "weekday_mean_profile": {"saturday": _compare(profile.mean(axis=0), late[1]), "sunday_or_holiday": _compare(profile.mean(axis=0), late[2])},
         "profile_times_weekend_ratio": {"saturday": _compare(split[5], late[1]), "sunday_or_holiday": _compare(split[6], late[2])},
+        # How large the real weekend shift is, within the yellow file: its own first-half shares of each day type.
+        "yellow_first_half_business_days": {"saturday": _compare(early[0], late[1]), "sunday_or_holiday": _compare(early[0], late[2])},
+        "yellow_first_half_same_day_type": {"saturday": _compare(early[1], late[1]), "sunday_or_holiday": _compare(early[2], late[2])},
     }
+    out["business_days_yellow_first_half"] = _compare(early[0], late[0])
     p, q = _shares(profile.mean(axis=0)), _shares(real[0])
     err = (p - q)[list(DAY_HOURS)].mean(axis=0) * 100
     order = np.argsort(-np.abs(err))[:8]
