@@ -1,1 +1,1 @@
-"""Readers of users' data files: each error is one line naming the file, the row and the field."""
+"""Readers of users' input files, one module per input, and the scenario-file assembler."""

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from city.errors import DataError
-from city.io.tables import read_table
-from city.weather import hours_in_year
+from city.io.columnar import read_table
+from city.io.weather import hours_in_year
 
 #: Logical columns and their default names in the file.
 COLUMNS = ("date", "hour", "count")

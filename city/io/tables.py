@@ -1,120 +1,165 @@
-"""Columns of a CSV or parquet table, checked one field at a time with errors naming file, row and field.
+"""Reading users' CSV files with precise errors, and snapping lon/lat points to the map.
 
-A CSV row is the line an editor shows (the header is line 1); a parquet row
-is the 1-based position of the record in the file, since parquet has no lines.
+Every loader in ``city/`` reads through :func:`read_csv`, so a malformed file
+always yields one :class:`~city.errors.DataError` naming the file and the line
+as a text editor shows it.
 """
 
 from __future__ import annotations
 
+import csv
+import math
+import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from city.csvio import read_csv
-from city.errors import DataError
+from city.errors import ConfigError, DataError
+from city.graph import City
 
-#: File endings read as parquet; anything else is read as CSV.
-PARQUET_SUFFIXES = (".parquet", ".pq")
+EARTH_RADIUS_M = 6_371_008.8
+
+def nearest_nodes(city: City, lon: np.ndarray, lat: np.ndarray, max_dist_m: float = 300.0) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest city node to each lon/lat point, and whether it lies within ``max_dist_m``.
+
+    Distances use a local equirectangular projection around the city (exact to
+    well under 1 % across a city).
+    """
+    from scipy.spatial import cKDTree
+
+    if city.crs != "lonlat":
+        raise ConfigError(f"city {city.name!r} has {city.crs!r} coordinates; lon/lat points need a lon/lat map")
+    scale = np.array([math.cos(math.radians(float(np.mean(city.xy[:, 1])))), 1.0]) * math.radians(1) * EARTH_RADIUS_M
+    tree = cKDTree(city.xy * scale)
+    pts = np.column_stack([np.asarray(lon, dtype=np.float64), np.asarray(lat, dtype=np.float64)])
+    finite = np.isfinite(pts).all(axis=1)
+    dist = np.full(len(pts), np.inf)
+    node = np.zeros(len(pts), dtype=np.int64)
+    if finite.any():
+        dist[finite], node[finite] = tree.query(pts[finite] * scale)
+    return node, dist <= max_dist_m
 
 
 @dataclass(frozen=True)
-class Table:
-    """Named columns as read (text from CSV, typed from parquet) and the row number of each record."""
+class CsvTable:
+    """Text columns of a CSV file with the 1-based line on which each record starts."""
 
     path: Path
-    columns: dict[str, np.ndarray]
-    rows: np.ndarray
+    columns: dict[str, list[str]]
+    lines: np.ndarray
 
     def __len__(self) -> int:
-        return len(self.rows)
+        return len(self.lines)
 
-    def error(self, i: int, field: str, message: str) -> DataError:
-        """A :class:`DataError` naming record ``i`` (0-based) and ``field``."""
-        return DataError(f"field '{field}': {message}", path=self.path, row=int(self.rows[i]))
+    def has(self, name: str) -> bool:
+        return name in self.columns
 
-    def numbers(self, name: str, *, integer: bool = False, lo: float | None = None, hi: float | None = None,
-                empty: float | None = None) -> np.ndarray:
-        """Column ``name`` as float64 (int64 with ``integer``); the first value that is not a number in ``lo..hi`` raises.
+    def require(self, names: Iterable[str]) -> None:
+        """Raise a :class:`DataError` on line 1 unless every column in ``names`` exists."""
+        _require_columns(self.path, list(self.columns), names)
 
-        ``empty`` replaces empty cells (nulls); without it they raise.
-        """
-        import pandas as pd
+    def col(self, name: str) -> list[str]:
+        return self.columns[name]
 
-        raw = pd.Series(self.columns[name])
-        blank = raw.isna().to_numpy() | (raw.astype(str).str.strip() == "").to_numpy()
-        values = pd.to_numeric(raw.where(~blank, None), errors="coerce").to_numpy(dtype=np.float64)
-        if empty is not None:
-            values = np.where(blank, empty, values)
-        bad = ~np.isfinite(values)
-        if integer:
-            bad |= values != np.floor(np.where(bad, 0.0, values))
-        if lo is not None:
-            bad |= values < lo
-        if hi is not None:
-            bad |= values > hi
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            kind = "an integer" if integer else "a number"
-            limits = f" in {lo:g}..{hi:g}" if lo is not None and hi is not None else f" ≥ {lo:g}" if lo is not None else ""
-            raise self.error(i, name, f"{raw.iloc[i]!r} is not {kind}{limits}")
-        return values.astype(np.int64) if integer else values
+    def subset(self, mask: np.ndarray) -> "CsvTable":
+        idx = np.flatnonzero(mask)
+        return CsvTable(self.path, {k: [v[i] for i in idx] for k, v in self.columns.items()}, self.lines[idx])
 
-    def times(self, name: str, timezone: str | None = None) -> np.ndarray:
-        """Column ``name`` as naive local ``datetime64[s]``: ISO 8601 text, dates, or timestamps.
+    def error(self, i: int, message: str) -> DataError:
+        """A :class:`DataError` for record ``i`` (0-based) of this table."""
+        return DataError(message, path=self.path, row=int(self.lines[i]))
 
-        A timestamp with a time zone is taken to ``timezone``'s wall clock; a
-        text offset (``-05:00``) is dropped, the wall clock kept (as
-        :func:`city.csvio.parse_times` reads it).
-        """
-        import pandas as pd
+    def floats(self, name: str, allow_empty: bool = False) -> np.ndarray:
+        """Column ``name`` as float64; empty cells become NaN when ``allow_empty``."""
+        values = [v if v or not allow_empty else "nan" for v in self.columns[name]]
+        try:
+            return np.array(values, dtype=np.float64)
+        except ValueError:
+            for i, v in enumerate(values):
+                try:
+                    float(v)
+                except ValueError:
+                    raise self.error(i, f"column '{name}': {v!r} is not a number") from None
+            raise
 
-        raw = pd.Series(self.columns[name])
-        if isinstance(raw.dtype, pd.DatetimeTZDtype):
-            parsed = raw.dt.tz_convert(timezone or "UTC").dt.tz_localize(None)
-        elif pd.api.types.is_datetime64_dtype(raw.dtype):
-            parsed = raw
-        else:
-            text = raw.astype(str).str.strip().str.replace(r"(Z|[+-]\d\d:?\d\d)$", "", regex=True)
-            parsed = pd.to_datetime(text.where(raw.notna(), None), format="ISO8601", errors="coerce")
-        bad = np.flatnonzero(parsed.isna().to_numpy())
-        if len(bad):
-            i = int(bad[0])
-            raise self.error(i, name, f"{raw.iloc[i]!r} is not a date/time (ISO 8601, e.g. 2022-03-01 or 2022-03-01 19:00)")
-        return parsed.to_numpy().astype("datetime64[s]")
+    def ints(self, name: str) -> np.ndarray:
+        """Column ``name`` as int64 (``12.0`` is accepted, ``12.5`` is not)."""
+        out = np.empty(len(self), dtype=np.int64)
+        for i, v in enumerate(self.columns[name]):
+            try:
+                out[i] = int(v)
+            except ValueError:
+                try:
+                    f = float(v)
+                    if not f.is_integer():
+                        raise ValueError
+                    out[i] = int(f)
+                except (ValueError, OverflowError):
+                    raise self.error(i, f"column '{name}': {v!r} is not an integer") from None
+        return out
 
 
-def read_table(path: Path | str, required: list[str], optional: list[str] | tuple[str, ...] = ()) -> Table:
-    """The ``required`` columns (a missing one raises on row 1) and those of ``optional`` the file has, from CSV or parquet."""
+def read_csv(path: Path, required: list[str], *, header: bool = True) -> CsvTable:
+    """Read a CSV file as text columns, checking that ``required`` columns exist.
+
+    With ``header=False`` the file has no header line and ``required`` names its
+    columns in order. Short records are padded with empty cells; a record with
+    more cells than the header raises.
+    """
     path = Path(path)
-    if path.suffix.lower() not in PARQUET_SUFFIXES:
-        csv = read_csv(path, list(required))
-        names = [*required, *(c for c in optional if csv.has(c) and c not in required)]
-        return Table(path, {c: np.asarray(csv.col(c), dtype=object) for c in names}, csv.lines)
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
     try:
-        pfile = pq.ParquetFile(path)
-    except FileNotFoundError:
-        raise DataError("cannot open file (no such file)", path=path) from None
-    except (OSError, pa.ArrowException) as exc:
-        raise DataError(f"not a readable parquet file ({exc})", path=path) from None
-    found = pfile.schema_arrow.names
-    missing = [c for c in required if c not in found]
+        fh = open(path, newline="", encoding="utf-8-sig")
+    except OSError as exc:
+        raise DataError(f"cannot open file ({exc.strerror or exc})", path=path) from None
+    with fh:
+        reader = csv.reader(fh)
+        try:
+            if header:
+                names = [c.strip() for c in next(reader, [])]
+            else:
+                names = list(required)
+            _require_columns(path, names, required)
+            rows: list[list[str]] = []
+            lines: list[int] = []
+            start = reader.line_num + 1
+            for rec in reader:
+                if rec and any(cell.strip() for cell in rec):
+                    if len(rec) > len(names):
+                        raise DataError(f"{len(rec)} fields, but the header has {len(names)}", path=path, row=start)
+                    rows.append(rec + [""] * (len(names) - len(rec)))
+                    lines.append(start)
+                start = reader.line_num + 1
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise DataError(f"not a readable CSV file ({exc})", path=path, row=reader.line_num or None) from None
+    columns = {name: [r[k].strip() for r in rows] for k, name in enumerate(names)}
+    return CsvTable(path, columns, np.array(lines, dtype=np.int64))
+
+
+def _require_columns(path: Path, found: list[str], names: Iterable[str]) -> None:
+    missing = [c for c in names if c not in found]
     if missing:
-        raise DataError(f"missing column(s) {', '.join(map(repr, missing))} (found: {', '.join(found)})", path=path, row=1)
-    names = [*required, *(c for c in optional if c in found and c not in required)]
-    try:
-        table = pfile.read(columns=names)
-    except (OSError, pa.ArrowException) as exc:
-        raise DataError(f"cannot read columns {', '.join(names)} ({exc})", path=path) from None
-    columns = {c: table.column(c).to_pandas().to_numpy() if not _tz_aware(table.column(c).type) else table.column(c).to_pandas()
-               for c in names}
-    return Table(path, columns, np.arange(1, table.num_rows + 1, dtype=np.int64))
+        raise DataError(f"missing column(s) {', '.join(map(repr, missing))} (found: {', '.join(found) or 'nothing'})", path=path, row=1)
 
 
-def _tz_aware(kind: object) -> bool:
-    import pyarrow as pa
+_OFFSET = re.compile(r"(Z|[+-]\d\d:?\d\d)$")
 
-    return pa.types.is_timestamp(kind) and kind.tz is not None
+
+def parse_times(table: CsvTable, name: str, fmt: str | None = None, *, strip_offset: bool = True) -> np.ndarray:
+    """Column ``name`` as naive ``datetime64[s]`` wall-clock times.
+
+    A trailing UTC offset (``-05:00``, ``Z``) is dropped when ``strip_offset``,
+    so ``2021-12-31 19:00:00-05:00`` reads as 19:00 local time. ``fmt`` is a
+    ``strptime`` format; without it ISO 8601 is expected.
+    """
+    import pandas as pd
+
+    values = [(_OFFSET.sub("", v) if strip_offset else v) for v in table.col(name)]
+    parsed = pd.to_datetime(pd.Series(values, dtype=object), format=fmt or "ISO8601", errors="coerce")
+    bad = np.flatnonzero(parsed.isna().to_numpy())
+    if len(bad):
+        i = int(bad[0])
+        expected = fmt or "ISO 8601, e.g. 2022-03-01 19:30"
+        raise table.error(i, f"column '{name}': {table.col(name)[i]!r} is not a date/time ({expected})")
+    return parsed.to_numpy().astype("datetime64[s]")

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from city.errors import DataError
-from city.io.tables import read_table
+from city.io.columnar import read_table
 
 #: Logical columns and their default names in the file.
 COLUMNS = ("time", "zone", "count")
