@@ -324,3 +324,20 @@ def test_nyc_runs_at_the_real_level_of_every_hour() -> None:
     assert world.demand_source.startswith("hourly-totals manhattan_hourly_trips_2019_2024.parquet + zone-od "
                                           "manhattan_zone_od_15min_2018.csv + zone-hourly yellow_zone_hourly_2022_01.parquet")
     np.testing.assert_allclose(world.expected_rate().sum(), totals.sum() * world.share, rtol=1e-3)
+
+
+def test_level_check_of_a_world_at_the_real_level_and_of_one_off_by_a_factor() -> None:
+    from types import SimpleNamespace
+
+    from city.demand.level_check import level_table
+
+    totals = year_counts()
+    exact = SimpleNamespace(expected_rate=lambda: np.column_stack([totals * 0.01, totals * 0.01]), event_rate=lambda: np.zeros((H, 2)))
+    table = level_table(exact, totals)
+    assert table["scale"] == pytest.approx(0.02) and table["all_hours"]["r"] == pytest.approx(1.0) and table["all_hours"]["mape_pct"] == 0
+    assert all(row["ratio_vs_usual_weekday"] == pytest.approx(1.0) for row in table["named"])
+    doubled = totals.copy()
+    doubled[np.arange(H) % 24 == 8] *= 2  # every 8 h twice too high: the MAPE of 8 h shows it, the named rows too
+    off = SimpleNamespace(expected_rate=lambda: doubled[:, None] * 0.02, event_rate=lambda: np.zeros((H, 1)))
+    table = level_table(off, totals)
+    assert table["by_hour"][8]["mape_pct"] > table["by_hour"][9]["mape_pct"]
