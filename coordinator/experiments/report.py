@@ -244,10 +244,11 @@ def _provenance(scen) -> list[str]:
              + (" (real map from the data directory)" if city.name != "synthetic" else " (synthetic, embedded in the package)") + "."]
     if kind == "SyntheticWorld":
         notes = list(getattr(world, "notes", None) or [])
-        real_base = world.base_source.startswith("zone profile")
+        real_base = world.base_source.startswith(("zone profile", "real hourly totals"))
+        level = " at the **real** level of every hour (see docs/real-demand.md)" if world.base_source.startswith("real hourly totals") else ""
         lines += [f"- Events, their texts and attendance, and every request: **synthetic** (the package's demand world, world seed "
                   f"{world.seed}); nothing in it is computed from the routing outcomes.",
-                  f"- Base demand: {'**real** trip counts' if real_base else '**synthetic**, shaped by the real hourly profile'}: "
+                  f"- Base demand: {'**real** trip counts' + level if real_base else '**synthetic**, shaped by the real hourly profile'}: "
                   f"{world.base_source}.",
                   "- Weather: " + ("**synthetic**" if any(n.startswith("weather:") for n in notes) else f"**real** ({world.weather.source})") + ".",
                   "- Points of interest: " + ("**synthetic**" if any(n.startswith("points of interest:") for n in notes)
