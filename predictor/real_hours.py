@@ -22,6 +22,12 @@ an hour is |y − ŷ| / y; the table gives its mean per hour of day, 15–21 h,
 with 95 % CIs from resampling test days (1,000 resamples), and the paired
 difference of each baseline against the network with its CI.
 
+Per zone, January 2022 (:func:`zone_surges`): the real yellow pickups per
+zone and hour are too short a series (one month) to train the network on, so
+the per-zone figure is the error of each zone's usual level (the median of
+the other days of the same weekday at that hour, holidays as Sundays) at 15–21 h, and the zone
+evenings that surge furthest beyond it.
+
 Run ``python -m predictor.real_hours DATA_DIR [OUT_DIR]``; it writes
 ``OUT_DIR/real-demand-predictor/predictor.json``.
 """
@@ -139,6 +145,53 @@ def run(data_dir: Path | str, seed: int = 0, epochs: int = 100, device: str = "c
             "by_hour": table, "largest_misses_test_15_21h": missed}
 
 
+def zone_surges(data_dir: Path | str, min_usual: float = 50.0) -> dict:
+    """Per-zone January 2022: the usual level's percent error at 15–21 h, and the evenings (17–22 h) furthest above usual.
+
+    ``usual`` of a zone, day and hour is the median of the other January days
+    of the same weekday (holidays as Sundays) at that hour; an evening counts when its usual is at least ``min_usual`` pickups.
+    """
+    from city.demand.dates import day_kind, holiday_dates
+    from city.io.zone_hourly import read_zone_hourly
+    from city.scenario import load_city, scenario_spec
+
+    spec = scenario_spec("nyc", data_dir)
+    city = load_city("nyc", data_dir)
+    zonal = next(t for t in spec.trips if t.kind == "zone-hourly" and t.files)
+    z = read_zone_hourly(zonal.files[0], columns=zonal.columns, timezone=spec.timezone)
+    holidays = holiday_dates(2022)
+    lookup = {int(v): k for k, v in enumerate(city.sector_ids)}
+    S, D = city.n_sectors, 31
+    counts = np.zeros((D, 24, S))
+    day = (z.time.astype("datetime64[D]") - np.datetime64("2022-01-01")).astype(np.int64)
+    hour = (z.time - z.time.astype("datetime64[D]").astype("datetime64[h]")).astype(np.int64)
+    keep = np.array([int(v) in lookup for v in z.zone]) & (day >= 0) & (day < D)
+    np.add.at(counts, (day[keep], hour[keep], np.array([lookup[int(v)] for v in z.zone[keep]])), z.count[keep])
+    dates = [dt.date(2022, 1, 1) + dt.timedelta(days=d) for d in range(D)]
+    kind = np.array([day_kind(d, holidays) for d in dates])
+    usual = np.zeros_like(counts)
+    for d in range(D):
+        others = (kind == kind[d]) & (np.arange(D) != d)
+        usual[d] = np.median(counts[others], axis=0)
+    eve = counts[:, 17:23].sum(axis=1)
+    eve_usual = usual[:, 17:23].sum(axis=1)
+    ok = eve_usual >= min_usual
+    ratio = np.where(ok, eve / np.maximum(eve_usual, 1e-9), 0.0)
+    top = np.dstack(np.unravel_index(np.argsort(-ratio, axis=None)[:12], ratio.shape))[0]
+    hours = counts[:, 15:22]
+    valid = hours > 0
+    pe = np.where(valid, np.abs(hours - usual[:, 15:22]) / np.where(valid, hours, 1.0), np.nan)
+    per_zone = np.nanmean(pe, axis=(0, 1))
+    return {"file": z.source, "metric": "mean over days and 15-21 h of |y - usual| / y per zone (y > 0), in per cent",
+            "usual_pe_pct": {"mean_over_zones": round(float(np.nanmean(per_zone)) * 100, 1),
+                             "median_over_zones": round(float(np.nanmedian(per_zone)) * 100, 1),
+                             "worst_zones": [{"zone": int(city.sector_ids[s]), "name": city.sector_names[s], "pe_pct": round(float(per_zone[s]) * 100, 1)}
+                                             for s in np.argsort(-per_zone)[:5]]},
+            "evenings_above_usual": [{"date": f"{dates[d]:%Y-%m-%d %a}", "zone": int(city.sector_ids[s]), "name": city.sector_names[s],
+                                      "pickups_17_22h": int(eve[d, s]), "usual": round(float(eve_usual[d, s]), 1), "ratio": round(float(ratio[d, s]), 2)}
+                                     for d, s in top]}
+
+
 def main(argv: list[str]) -> int:
     """``DATA_DIR [OUT_DIR]``: write the table's JSON under ``OUT_DIR`` (default ``benchmarks``)."""
     from city.fingerprint import machine
@@ -149,7 +202,7 @@ def main(argv: list[str]) -> int:
     out = Path(argv[1] if len(argv) > 1 else "benchmarks") / "real-demand-predictor"
     out.mkdir(parents=True, exist_ok=True)
     doc = {"command": f"python -m predictor.real_hours {' '.join(argv)}", "date": dt.date.today().isoformat(), "machine": machine(),
-           **run(argv[0])}
+           **run(argv[0]), "january_zones": zone_surges(argv[0])}
     (out / "predictor.json").write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {out / 'predictor.json'}")
     return 0
