@@ -8,9 +8,11 @@ Modules, each importing only those above it:
 ``geography``   anchor sectors, busyness, points of interest, sector intensity, gravity OD
 ``venues``      venues and their calendar of :class:`~city.demand.venues.EventSpec`
 ``profile``     the base profile from real trip data, and the fleet's share of the market
+``real_level``  base demand at a city's real hourly trip totals, split over sectors
 ``attendance``  event text written before the event, realised attendance, taxi trips
 ``synthetic``   :class:`SyntheticWorld`: base demand plus event surges, on any map
 ``recorded``    :class:`RecordedWorld`: real trip records replayed
+``level_check``, ``split_check``  the ``nyc`` world's level and split against real counts (scripts)
 
 :func:`estimate_beta` gives β from chosen months only (the training months).
 """
