@@ -238,7 +238,8 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
     names them.  ``share`` (default
     ``$SURGE_SHARE``) overrides the file's share of its trips; on a
     synthesised world it scales base demand and event trips (default
-    :data:`city.demand.profile.FLEET_SHARE`).
+    :data:`city.demand.profile.FLEET_SHARE`; with hourly totals,
+    :func:`city.demand.real_level.default_share`).
     """
     spec = scenario_spec(name, data_dir)
     city = load_city(name, data_dir)
