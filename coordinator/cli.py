@@ -275,9 +275,12 @@ def build_parser() -> argparse.ArgumentParser:
     from coordinator.fleet import add_parsers as add_fleet
     from coordinator.reproduce import add_parser as add_reproduce
 
+    from coordinator.watch.cli import add_parser as add_watch
+
     add_bench(sub)
     add_fleet(sub)
     add_reproduce(sub)
+    add_watch(sub)
     try:
         from predictor.cli import add_parser as add_predictor
     except ImportError:
