@@ -67,7 +67,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
             raise ConfigError(feed.error)
         what = f"live: run {args.run!r} as a read-only observer"
     print(f"surge watch: http://{host}:{port}/ ({what}); Ctrl-C stops it", file=sys.stderr, flush=True)
-    config = uvicorn.Config(make_app(feed, what), host=host, port=port, log_level="warning", ws="websockets")
+    config = uvicorn.Config(make_app(feed, what), host=host, port=port, log_level="warning", ws="websockets-sansio")
     try:
         uvicorn.Server(config).run()
     finally:

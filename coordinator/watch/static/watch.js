@@ -11,15 +11,21 @@ let city = null, px = null, streets = null, heat = null, heatKey = "", frame = n
 function $(id) { return document.getElementById(id); }
 
 function project(m) {
-  // unit-square coordinates (north up) to canvas pixels
-  const n = m.xy.length / 2, size = canvas.width - 2 * PAD;
-  let maxX = 0, maxY = 0;
+  // unit-square coordinates (north up) to canvas pixels; a long north-south city is turned a quarter clockwise (north to the right)
+  const n = m.xy.length / 2, longest = 1400, tallest = 900;
+  let maxX = 1e-9, maxY = 1e-9;
   for (let i = 0; i < n; i++) { maxX = Math.max(maxX, m.xy[2 * i]); maxY = Math.max(maxY, m.xy[2 * i + 1]); }
-  canvas.height = Math.round(maxY / Math.max(maxX, 1e-9) * size + 2 * PAD) || canvas.width;
+  const turned = maxY > 1.5 * maxX, w = turned ? maxY : maxX, h = turned ? maxX : maxY;
+  let scale = (longest - 2 * PAD) / w;
+  if (h * scale + 2 * PAD > tallest) scale = (tallest - 2 * PAD) / h;
+  canvas.width = Math.round(w * scale + 2 * PAD);
+  canvas.height = Math.round(h * scale + 2 * PAD);
+  $("north").textContent = turned ? "north is to the right" : "north is up";
   const out = new Float64Array(2 * n);
   for (let i = 0; i < n; i++) {
-    out[2 * i] = PAD + m.xy[2 * i] * size / Math.max(maxX, maxY);
-    out[2 * i + 1] = canvas.height - PAD - m.xy[2 * i + 1] * size / Math.max(maxX, maxY);
+    const x = m.xy[2 * i], y = m.xy[2 * i + 1];
+    out[2 * i] = turned ? PAD + y * scale : PAD + x * scale;
+    out[2 * i + 1] = turned ? PAD + x * scale : canvas.height - PAD - y * scale;
   }
   return out;
 }
@@ -51,7 +57,7 @@ function drawHeat(values, vmax) {
   heat = layer();
   if (!values) return;
   const g = heat.getContext("2d"), n = city.node_sector.length;
-  const radius = Math.max(4, 1.3 * (canvas.width - 2 * PAD) / Math.sqrt(n));
+  const radius = Math.max(4, 0.9 * Math.sqrt((canvas.width - 2 * PAD) * (canvas.height - 2 * PAD) / n));
   g.globalAlpha = 0.55;
   for (let i = 0; i < n; i++) {
     const v = values[city.node_sector[i]];
@@ -109,7 +115,7 @@ function draw() {
   ctx.fillStyle = "#c2255c";
   ctx.strokeStyle = "#fff";
   ctx.lineWidth = 1;
-  for (const ev of currentEvents(frame)) star(ctx, px[2 * ev.node], px[2 * ev.node + 1], 9);
+  for (const ev of currentEvents(frame)) star(ctx, px[2 * ev.node], px[2 * ev.node + 1], 7);
   for (let a = 0; a < frame.pos.length; a++) {
     const node = frame.pos[a];
     ctx.fillStyle = STATE_COLOURS[frame.state[a]];
@@ -140,15 +146,17 @@ function panel(msg) {
   if (f.done) status += f.stop === "done" ? "; the run is over" : `; the run stopped: ${f.stop}`;
   $("status").textContent = status;
   const events = currentEvents(f);
-  $("events").replaceChildren(...(events.length ? events : [{ title: "none" }]).map(ev => {
+  const shown = events.slice(0, 8).map(ev => `${ev.title} (${ev.start}–${ev.end})`);
+  if (events.length > shown.length) shown.push(`and ${events.length - shown.length} more`);
+  $("events").replaceChildren(...(shown.length ? shown : ["none"]).map(text => {
     const li = document.createElement("li");
-    li.textContent = ev.start ? `${ev.title} (${ev.start}–${ev.end})` : ev.title;
+    li.textContent = text;
     return li;
   }));
   if (city.mode === "replay") {
     $("seek").max = msg.count - 1;
     $("seek").value = msg.index;
-    $("play").textContent = msg.playing ? "⏸" : "▶";
+    $("play").textContent = msg.playing ? "pause" : "play";
   }
   playing = msg.playing;
   document.body.dataset.frameIndex = msg.index;
