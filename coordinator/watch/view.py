@@ -58,6 +58,8 @@ class FleetView:
         self.eta: dict[int, np.ndarray] = {}
         self.now: Minute | None = None
         self.cost = 0
+        #: The minutes (1-based, inclusive) whose stage costs ``cost`` sums: a minute's cost shows in the next state.
+        self.cost_to = 0
         self.served = 0
         self.fallbacks = 0
         #: The first minute this view saw from its start (a watcher that joins late counts from there).
@@ -82,6 +84,7 @@ class FleetView:
         else:
             # minute t-1's stage cost: requests entered by t-1 still waiting at t
             self.cost += outstanding - int(np.count_nonzero(entry == t))
+            self.cost_to = t
             self.served += len(picked)
         for r in np.asarray(picked).tolist():
             self.requests.pop(r, None)
@@ -138,7 +141,7 @@ class FleetView:
         """The run ended; a replay knows the last minute's cost and service, which no later state reports live."""
         self.done, self.stop_reason = True, reason
         if cost is not None:
-            self.cost = cost
+            self.cost, self.cost_to = cost, t
         if served is not None:
             self.served = served
 
@@ -182,6 +185,7 @@ class FleetView:
             "forecast": None if eta is None else [None if np.isnan(v) else round(float(v), 4) for v in eta],
             "realised": np.round(realised, 4).tolist(),
             "cost": self.cost,
+            "cost_to": self.cost_to,
             "served": self.served,
             "waiting": len(self.requests),
             "fallbacks": self.fallbacks,

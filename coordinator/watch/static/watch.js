@@ -142,7 +142,8 @@ function panel(msg) {
   const counts = [0, 0, 0, 0];
   for (const s of f.state) counts[s]++;
   let status = STATE_NAMES.map((name, i) => `${counts[i]} ${name}`).join(", ");
-  if (f.since) status += `; counted from minute ${f.since + 1}, when this view joined`;
+  status += f.cost_to ? `; cost and served count minutes ${(f.since || 0) + 1}–${f.cost_to}` : "";
+  if (f.since) status += ` (this view joined at minute ${f.since + 1})`;
   if (f.done) status += f.stop === "done" ? "; the run is over" : `; the run stopped: ${f.stop}`;
   $("status").textContent = status;
   const events = currentEvents(f);
