@@ -40,7 +40,19 @@ from __future__ import annotations
 from collections import defaultdict
 
 from bus.certs import taxi_name
-from bus.keys import COORDINATOR, OBSERVER, PREDICTOR, PUB, QUERYABLE, SCHEME, TAXI, TOKEN, Channel, key, root
+from bus.keys import (
+    COORDINATOR,
+    OBSERVER,
+    PREDICTOR,
+    PUB,
+    QUERYABLE,
+    SCHEME,
+    TAXI,
+    TOKEN,
+    Channel,
+    key,
+    root,
+)
 
 INGRESS, EGRESS = "ingress", "egress"
 #: (use, writing?) -> [(flow, messages)]

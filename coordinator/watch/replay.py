@@ -72,7 +72,7 @@ def read_results(path: str | Path) -> dict:
 
 def build_replay(path: str | Path, fallback) -> Replay:  # noqa: ANN001
     """Replay the results file at ``path`` into frames; ``fallback`` is the config to use when the file records none."""
-    from agents.forecast import make_provider
+    from agents.forecast_providers import make_provider
 
     p = Path(path)
     doc = read_results(p)
