@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -19,7 +20,17 @@ import numpy as np
 
 from bus.keys import OBSERVED, Keys
 from bus.session import Inbox, SessionArgs, open_session
-from bus.wire import Control, ForecastMsg, RunSpec, SectorForecast, Snapshot, State, Stop, Turn, decode
+from bus.wire import (
+    Control,
+    ForecastMsg,
+    RunSpec,
+    SectorForecast,
+    Snapshot,
+    State,
+    Stop,
+    Turn,
+    decode,
+)
 from city.errors import ConfigError, SurgeError
 from coordinator.watch.citymap import city_map
 from coordinator.watch.view import FleetView
@@ -78,7 +89,10 @@ class LiveFeed:
                 self._follow(session)
         except SurgeError as exc:
             self.error = str(exc)
-            self.ready.set()
+        finally:
+            if not self.ready.is_set():  # the page never comes: say why rather than leave the command waiting
+                self.error = self.error or "the bus thread stopped before the run's spec came (see the traceback above)"
+                self.ready.set()
 
     def _spec(self, session) -> RunSpec:  # noqa: ANN001
         deadline = time.monotonic() + self.cfg.join_timeout_s
@@ -142,7 +156,7 @@ class LiveFeed:
                 stop: Stop = decode(payload, Stop, key)  # type: ignore[assignment]
                 view.stop(stop.t, stop.reason)
         except SurgeError as exc:  # a message that fails its checks is dropped, as every surge process drops it
-            print(f"surge watch: dropped a message on {key}: {exc}", flush=True)
+            print(f"surge watch: dropped a message on {key}: {exc}", file=sys.stderr, flush=True)
 
     @staticmethod
     def _state(view: FleetView, s: State) -> bool:

@@ -82,7 +82,7 @@ def build_replay(path: str | Path, fallback) -> Replay:  # noqa: ANN001
 
         os.environ[SHARE_ENV] = repr(float(doc["share"]))  # the world the run was built with (surge demo scales it)
     controls = np.asarray(doc["controls"], dtype=np.int32)
-    scen, requests, start, context = cfg.instance()
+    scen, requests, start, _ = cfg.instance()
     city = scen.city
     provider = make_provider(cfg.forecast_name(), cfg.options.get("model"))
     played = len(controls)

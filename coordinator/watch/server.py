@@ -59,7 +59,7 @@ async def _replay(ws: Any, replay: Replay) -> None:
             try:
                 timeout = 1.0 / (REPLAY_FPS * speed) if playing else None
                 command = (await asyncio.wait_for(ws.receive_text(), timeout)).split()
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 cursor = min(cursor + 1, n - 1)
                 playing = cursor < n - 1
                 continue

@@ -157,9 +157,7 @@ class FleetView:
             c = now.committed.get(a)
             if c is None:
                 out[a] = DECIDING if a in now.turns and not self.done else FREE
-            elif c < 0:
-                out[a] = TO_PICKUP
-            elif waiting.size and self.city.dist[c, waiting].min() < self.city.dist[now.pos[a], waiting].min():
+            elif c < 0 or (waiting.size and self.city.dist[c, waiting].min() < self.city.dist[now.pos[a], waiting].min()):
                 out[a] = TO_PICKUP
         return out
 

@@ -19,8 +19,8 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 import pytest
@@ -160,7 +160,7 @@ def test_a_replay_plays_the_run_back_to_its_cost(live_run: dict, browser, tmp_pa
         while body.get_attribute("data-done") != "1" and len(shown) <= MINUTES:
             before = body.get_attribute("data-frame-index")
             browser.find_element("id", "step").click()  # on to the end of the next minute, its controls committed
-            _wait(lambda: body.get_attribute("data-frame-index") != before, 10, f"the step after frame {before}")
+            _wait(lambda before=before: body.get_attribute("data-frame-index") != before, 10, f"the step after frame {before}")
             shown.append(int(_text(browser, "minute")))
         assert shown == [*range(1, MINUTES + 1), MINUTES]  # minute 0 opens with its first wave deciding
         assert _text(browser, "cost") == str(result["total_cost"]) and _text(browser, "served") == str(result["served"])
@@ -183,10 +183,10 @@ def test_a_replay_plays_the_run_back_to_its_cost(live_run: dict, browser, tmp_pa
 def test_a_replay_of_a_file_that_is_not_a_run_is_one_line(tmp_path: Path) -> None:
     bad = tmp_path / "r.json"
     bad.write_text(json.dumps({"taxis": 2, "minutes": 3}))
-    proc = subprocess.run([*CLI, "watch", "--replay", str(bad)], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([*CLI, "watch", "--replay", str(bad)], capture_output=True, text=True, timeout=120, check=False)
     assert proc.returncode == 2
-    assert proc.stderr.strip().splitlines() == [f"surge: error: {bad}: no key 'controls': not a run's results "
-                                                "(`surge fleet --json`, `surge coordinator --json`, `surge demo`)"]
+    expected = f"surge: error: {bad}: no key 'controls': not a run's results (`surge fleet --json`, `surge coordinator --json`, `surge demo`)"
+    assert proc.stderr.strip().splitlines() == [expected]
 
 
 @pytest.mark.usefixtures("compiled_kernels")
@@ -194,8 +194,8 @@ def test_a_replay_rebuilds_every_minute_of_the_run_from_its_controls(tmp_path: P
     """Frames from an in-process run's controls: each minute's fleet as the simulator had it, and its cost and service."""
     from dataclasses import asdict
 
-    from city.sim import FleetSim, decisions_hash
     from city.episode import run_episode
+    from city.sim import FleetSim, decisions_hash
     from coordinator.runtime import FleetConfig
     from coordinator.watch.replay import build_replay
 
