@@ -89,6 +89,8 @@ class LiveFeed:
                 self._follow(session)
         except SurgeError as exc:
             self.error = str(exc)
+            if self.ready.is_set():  # mid-run: the page keeps the last frame; the terminal says why it stopped
+                print(f"surge watch: error: {exc}", file=sys.stderr, flush=True)
         finally:
             if not self.ready.is_set():  # the page never comes: say why rather than leave the command waiting
                 self.error = self.error or "the bus thread stopped before the run's spec came (see the traceback above)"
