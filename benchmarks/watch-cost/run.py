@@ -1,5 +1,7 @@
 """What watching costs a fleet: its median minute with and without `surge watch` (and a headless browser on its page) attached.
 
+``--no-browser`` attaches the watch server alone (an operator's browser on another machine).
+
 Runs the same secured run (router, coordinator, one process per taxi, all on
 this host) alternately without and with a watcher, ``--rounds`` times each,
 and writes every run's minute times and the paired differences.
@@ -67,7 +69,8 @@ def one_run(args: argparse.Namespace, watched: bool, tmp: Path) -> dict:
             assert "surge watch: http://" in line, line
             threading.Thread(target=watch.stderr.read, daemon=True).start()
             wait_for_tcp("127.0.0.1", http, 60)
-            driver = browser(f"http://127.0.0.1:{http}/", str(tmp / "profile"))
+            if args.browser:
+                driver = browser(f"http://127.0.0.1:{http}/", str(tmp / "profile"))
         procs.append(subprocess.Popen([*CLI, "agents", *bus, "--run", run, "--ids", f"0-{args.taxis - 1}"], stderr=subprocess.DEVNULL))
         coord.wait(3600)
         if driver is not None:
@@ -94,6 +97,7 @@ def main() -> None:
     p.add_argument("--minutes", type=int, default=20)
     p.add_argument("--samples", type=int, default=200)
     p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--no-browser", dest="browser", action="store_false", help="attach the watch server without a browser")
     p.add_argument("--json", required=True)
     args = p.parse_args()
     runs = []
@@ -105,7 +109,8 @@ def main() -> None:
     pairs = [(next(x for x in runs if x["round"] == r and x["watched"])["median_minute_s"],
               next(x for x in runs if x["round"] == r and not x["watched"])["median_minute_s"]) for r in range(args.rounds)]
     diff = [w - u for w, u in pairs]
-    doc = {"question": "the fleet's median minute with and without surge watch (server and a headless browser) attached",
+    what = "surge watch (server and a headless browser on this host)" if args.browser else "surge watch (server only)"
+    doc = {"question": f"the fleet's median minute with and without {what} attached",
            "command": "python benchmarks/watch-cost/run.py " + " ".join(sys.argv[1:]),
            "date": dt.datetime.now().isoformat(timespec="seconds"),
            "machine": f"{platform.machine()}, {__import__('os').cpu_count()} vCPU, shared with other work",
