@@ -53,7 +53,7 @@ def one_run(args: argparse.Namespace, watched: bool, tmp: Path) -> dict:
     bus = ["--connect", endpoint, "--certs", str(certs)]
     run = f"cost{int(time.time())}"
     procs = [subprocess.Popen([*CLI, "router", "--certs", str(certs), "--listen", endpoint], stderr=subprocess.DEVNULL)]
-    driver, frames = None, 0
+    driver, frames, shown = None, None, None
     try:
         wait_for_tcp("127.0.0.1", port, 60)
         coord = subprocess.Popen([*CLI, "coordinator", *bus, "--run", run, "--taxis", str(args.taxis), "--minutes", str(args.minutes),

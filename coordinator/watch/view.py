@@ -81,11 +81,6 @@ class FleetView:
             self.requests.clear()
             if self.since is None:
                 self.since = t
-        else:
-            # minute t-1's stage cost: requests entered by t-1 still waiting at t
-            self.cost += outstanding - int(np.count_nonzero(entry == t))
-            self.cost_to = t
-            self.served += len(picked)
         for r in np.asarray(picked).tolist():
             self.requests.pop(r, None)
         sectors = self.city.node_sector[pickup] if len(pickup) else np.zeros(0, dtype=np.int64)
@@ -96,6 +91,10 @@ class FleetView:
             self.requests[r] = (p, e)
         if len(self.requests) != outstanding:
             return False
+        if not full:  # minute t-1's stage cost: requests entered by t-1 still waiting at t; and its pickups
+            self.cost += outstanding - int(np.count_nonzero(entry == t))
+            self.cost_to = t
+            self.served += len(picked)
         early = self.early.pop(t, None)
         self.now = Minute(t=t, pos=np.asarray(pos, dtype=np.int64), tau=np.asarray(tau, dtype=np.int64))
         if early is not None:

@@ -208,12 +208,15 @@ def test_a_replay_rebuilds_every_minute_of_the_run_from_its_controls(tmp_path: P
     path.write_text(json.dumps(doc))
     replay = build_replay(path, cfg)
     frames = [json.loads(replay.frames[i]) for i in replay.minute_ends]
-    sim = FleetSim(scen.city, requests, start)
+    sim, costs = FleetSim(scen.city, requests, start), []
     for t, frame in enumerate(frames[:-1]):
         obs = sim.observe()
         assert frame["minute"] == t + 1 and frame["pos"] == obs.pos.tolist() and frame["waiting"] == obs.req_index.size
         assert frame["taxis"] == 3 and len(frame["forecast"]) == scen.city.n_sectors
-        sim.step(res.controls[t])
+        # the cost and pickups of the minutes before, as the states on the bus tell them
+        assert frame["cost"] == sum(costs) and frame["cost_to"] == t
+        assert frame["served"] == int((sim.state.picked_at >= 0).sum())
+        costs.append(sim.step(res.controls[t]))
     assert frames[-1]["done"] and frames[-1]["cost"] == res.total_cost and frames[-1]["served"] == res.served
     assert replay.map["events"] and len(replay.map["xy"]) == 2 * scen.city.n_nodes
     # a file whose controls were altered is refused in one line naming it
