@@ -21,6 +21,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--hour", type=hour, default=19, help="the episode's hour, for the events layer (live)")
     p.add_argument("--world-seed", type=int, default=0, help="the demand world's seed, for the events layer (live)")
     p.add_argument("--seed", type=int, default=0, help="replay of a results file that records no config: the episode seed")
+    p.add_argument("--forecast", default=None,
+                   help="replay of a results file that records no config: the forecast provider its map shows (default: the policy's)")
     scenario_args(p)
     p.add_argument("--join-timeout", type=float, default=120.0, help="live: seconds to wait for the run's spec")
     p.add_argument("--http", default="127.0.0.1:8050", metavar="HOST:PORT",
@@ -50,7 +52,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
         from coordinator.watch.replay import build_replay
 
         fallback = FleetConfig(scenario=args.scenario, data_dir=args.data, date=args.date, hour=args.hour, seed=args.seed,
-                               world_seed=args.world_seed)
+                               world_seed=args.world_seed, options={"forecast": args.forecast} if args.forecast else {})
         feed = build_replay(args.replay, fallback)
         what = f"replay of {args.replay}"
     else:
