@@ -1,7 +1,7 @@
 """The router's access control, written from the key scheme (:data:`bus.keys.SCHEME`).
 
 Default deny.  Each session is known by its certificate's common name
-(``coordinator``, ``predictor``, ``taxi-<i>``; see :mod:`bus.certs`), and is
+(``coordinator``, ``predictor``, ``observer``, ``taxi-<i>``; see :mod:`bus.certs`), and is
 allowed exactly what its role does with each key, in each direction through
 the router:
 
@@ -25,7 +25,14 @@ and reads only its own ``turn/<i>``.  So one key has one writer: nobody but
 the coordinator can publish a state, a turn, a committed control or stop, or
 answer ``spec``; nobody but taxi *i* can propose taxi *i*'s control.  The
 forecast keys are the exception the scheme names: the predictor service or
-the coordinator may publish them (``also_written_by``).
+the coordinator may publish them (``also_written_by``).  The ``observer``
+reads every key a follower of the run needs (every taxi's turn and committed
+control included) and writes none.
+
+Zenoh matches a message against a rule by inclusion: a subscription to
+``surge/<run>/**`` is wider than every rule here, so the router refuses it
+(silently: the client gets no error, and nothing).  Subscribe key by key
+(:data:`bus.keys.OBSERVED`).
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ from collections import defaultdict
 from bus.certs import taxi_name
 from bus.keys import (
     COORDINATOR,
+    OBSERVER,
     PREDICTOR,
     PUB,
     QUERYABLE,
@@ -91,7 +99,7 @@ def grants(role: str, index: int | None = None, run: str | None = None) -> list[
 
 def identities(taxis: int) -> list[tuple[str, str, int | None]]:
     """Every identity of a fleet of ``taxis``: ``(common name, role, taxi index)``."""
-    return [(COORDINATOR, COORDINATOR, None), (PREDICTOR, PREDICTOR, None),
+    return [(COORDINATOR, COORDINATOR, None), (PREDICTOR, PREDICTOR, None), (OBSERVER, OBSERVER, None),
             *((taxi_name(i), TAXI, i) for i in range(taxis))]
 
 

@@ -4,7 +4,7 @@ Every process on a secured bus holds a certificate signed by the fleet's CA,
 and the router admits only those (mutual TLS).  The router then knows each
 session's common name, which the access-control rules of
 :mod:`bus.access` are written against: ``router``, ``coordinator``,
-``predictor`` and ``taxi-<i>``.
+``predictor``, ``observer`` (read-only: ``surge watch``) and ``taxi-<i>``.
 
 Keys are ECDSA P-256 in unencrypted PKCS#8 PEM files of mode 0600 (zenoh
 reads them at start-up; it cannot prompt for a pass phrase).  The CA's key
@@ -24,7 +24,7 @@ from pathlib import Path
 from city.errors import ConfigError
 
 #: The roles that are not taxis, each with one certificate.
-ROLES = ("router", "coordinator", "predictor")
+ROLES = ("router", "coordinator", "predictor", "observer")
 #: Addresses the router's certificate is valid for unless told otherwise: loopback.
 DEFAULT_HOSTS = ("127.0.0.1", "localhost")
 MANIFEST = "fleet.json"

@@ -41,6 +41,8 @@ _RUN = re.compile(r"^[A-Za-z0-9_.-]+$")
 
 #: Roles on the bus; a taxi's identity is ``taxi-<i>`` (see :mod:`bus.certs`).
 COORDINATOR, PREDICTOR, TAXI = "coordinator", "predictor", "taxi"
+#: A read-only follower of a whole run (``surge watch``, a dashboard): it reads every key it needs and writes none.
+OBSERVER = "observer"
 #: How a key is used: published samples, a queryable that answers queries, or liveliness tokens.
 PUB, QUERYABLE, TOKEN = "pub", "queryable", "token"
 
@@ -77,20 +79,27 @@ class Channel:
 
 
 SCHEME: tuple[Channel, ...] = (
-    Channel("spec", False, QUERYABLE, COORDINATOR, (TAXI,)),
-    Channel("snapshot", False, QUERYABLE, COORDINATOR, (TAXI,)),
-    Channel("state", False, PUB, COORDINATOR, (TAXI,)),
-    Channel("forecast", False, PUB, COORDINATOR, (TAXI,), per_sector=True, also_written_by=(PREDICTOR,), answered_by=COORDINATOR),
-    Channel("dropoffs", False, PUB, COORDINATOR, (TAXI,), also_written_by=(PREDICTOR,)),
-    Channel("turn", True, PUB, COORDINATOR, (TAXI,), own_only=True),
+    Channel("spec", False, QUERYABLE, COORDINATOR, (TAXI, OBSERVER)),
+    Channel("snapshot", False, QUERYABLE, COORDINATOR, (TAXI, OBSERVER)),
+    Channel("state", False, PUB, COORDINATOR, (TAXI, OBSERVER)),
+    Channel("forecast", False, PUB, COORDINATOR, (TAXI, OBSERVER), per_sector=True, also_written_by=(PREDICTOR,),
+            answered_by=COORDINATOR),
+    Channel("dropoffs", False, PUB, COORDINATOR, (TAXI, OBSERVER), also_written_by=(PREDICTOR,)),
+    Channel("turn", True, PUB, COORDINATOR, (TAXI, OBSERVER), own_only=True),
     Channel("control", True, PUB, TAXI, (COORDINATOR,)),
-    Channel("committed", True, PUB, COORDINATOR, (TAXI,)),
-    Channel("alive", True, TOKEN, TAXI, (COORDINATOR,)),
+    Channel("committed", True, PUB, COORDINATOR, (TAXI, OBSERVER)),
+    Channel("alive", True, TOKEN, TAXI, (COORDINATOR, OBSERVER)),
     Channel("predictor", False, QUERYABLE, PREDICTOR, (COORDINATOR,)),
-    Channel("stop", False, PUB, COORDINATOR, (TAXI,)),
-    Channel("coordinator", False, TOKEN, COORDINATOR, (TAXI,)),
+    Channel("stop", False, PUB, COORDINATOR, (TAXI, OBSERVER)),
+    Channel("coordinator", False, TOKEN, COORDINATOR, (TAXI, OBSERVER)),
     Channel("ack", True, PUB, TAXI, (COORDINATOR,)),
 )
+
+#: What an observer subscribes to, key by key below ``surge/<run>/``.  On a secured bus the
+#: router admits a subscription only if its key expression is included in a rule's (zenoh's
+#: access control matches by inclusion), so ``surge/<run>/**``, wider than every rule, is
+#: refused without a word to the client; these keys are each within the observer's rules.
+OBSERVED = ("state", "forecast/*", "turn/*", "committed/*", "stop")
 CHANNELS = {c.name: c for c in SCHEME}
 
 

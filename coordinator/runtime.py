@@ -31,6 +31,7 @@ handling one, ends the run.
 from __future__ import annotations
 
 import datetime as dt
+import os
 import sys
 import time
 from dataclasses import asdict, dataclass, field
@@ -361,11 +362,16 @@ class Coordinator:
                     f"{costs[-1]} requests waiting ({step_s[-1]:.2f} s)")
             self._pace(inbox, t0 + cfg.minute_s)
         res = self.sim.result(costs, controls, step_s)
+        from city.scenario import SHARE_ENV
+
         return {
             "run": cfg.run,
             "policy": cfg.policy,
             "taxis": cfg.taxis,
             "minutes": cfg.minutes,
+            "config": asdict(cfg),
+            # the demand share the run's world was built with ($SURGE_SHARE; None: the default), for a replay
+            "share": float(os.environ[SHARE_ENV]) if os.environ.get(SHARE_ENV) else None,
             "total_cost": res.total_cost,
             "outstanding_end": res.outstanding_end,
             "served": res.served,

@@ -24,13 +24,14 @@ from coordinator.cli import (
     predictor,
     report,
     reproduce,
+    watch,
 )
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="surge", description="Event-aware routing for autonomous taxi fleets.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (evaluate, report, city, demand, demo, bench, fleet, reproduce, predictor):
+    for module in (evaluate, report, city, demand, demo, bench, fleet, reproduce, predictor, watch):
         module.add_parser(sub)
     return parser
 

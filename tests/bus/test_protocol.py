@@ -143,14 +143,14 @@ OUTSIDE = [sys.executable, str(Path(__file__).with_name("outside_client.py"))]
 
 @pytest.mark.usefixtures("compiled_kernels")
 def test_an_outside_client_follows_a_run_and_rebuilds_every_taxis_position(tmp_path: Path) -> None:
-    """A secured run of 2 taxis; the outside client presents taxi-2's certificate, the one reader's right it needs."""
+    """A secured run of 2 taxis; the outside client holds the read-only observer certificate, and subscribes key by key."""
     from bus.certs import make_certs
     from bus.router import free_tcp_port, wait_for_tcp
     from city.sim import FleetSim
     from coordinator.runtime import FleetConfig
 
     certs = tmp_path / "certs"
-    make_certs(certs, 3)
+    make_certs(certs, 2)
     port = free_tcp_port()
     endpoint = f"tls/127.0.0.1:{port}"
     bus = ["--connect", endpoint, "--certs", str(certs)]
@@ -161,7 +161,7 @@ def test_an_outside_client_follows_a_run_and_rebuilds_every_taxis_position(tmp_p
         procs.append(subprocess.Popen([*CLI, "coordinator", *bus, "--run", run, "--taxis", "2", "--minutes", str(minutes),
                                        "--forecast", "true-rate", "--samples", "30", "--deadline", "120", "--join-timeout", "300",
                                        "--json", str(result_path)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True))
-        client = subprocess.Popen([*OUTSIDE, endpoint, run, str(seen_path), str(certs), "taxi-2"], stdout=subprocess.PIPE,
+        client = subprocess.Popen([*OUTSIDE, endpoint, run, str(seen_path), str(certs), "observer"], stdout=subprocess.PIPE,
                                   stderr=subprocess.PIPE, text=True)
         procs.append(client)
         assert client.stdout.readline().strip() == "ready", client.stderr.read()
