@@ -33,15 +33,16 @@ import json
 import re
 import statistics
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from city.errors import ConfigError
 
-RENDERERS: dict[str, Callable[["Section"], list[str]]] = {}
+RENDERERS: dict[str, Callable[[Section], list[str]]] = {}
 REQUIRED = ("title", "kind", "files")
 HEADER = ["# Results", "",
           "Current figures only, generated from the committed result files by `surge report --results-page`;",
@@ -50,9 +51,9 @@ HEADER = ["# Results", "",
           "percent errors do not depend on the machine.", ""]
 
 
-def renderer(kind: str) -> Callable[[Callable[["Section"], list[str]]], Callable[["Section"], list[str]]]:
+def renderer(kind: str) -> Callable[[Callable[[Section], list[str]]], Callable[[Section], list[str]]]:
     """Register a section renderer under ``kind`` (the ``kind`` key of a ``page.toml`` section)."""
-    def register(fn: Callable[["Section"], list[str]]) -> Callable[["Section"], list[str]]:
+    def register(fn: Callable[[Section], list[str]]) -> Callable[[Section], list[str]]:
         RENDERERS[kind] = fn
         return fn
     return register
@@ -239,7 +240,7 @@ def render_fields(sec: Section) -> list[str]:
 @renderer("paired-results")
 def render_paired_results(sec: Section) -> list[str]:
     """``policy`` against ``against`` per hour in ``surge.results/1`` files, instance by instance, with 95 % CIs."""
-    from coordinator.experiments.analysis import complete_seeds, compare_pair
+    from coordinator.experiments.analysis import compare_pair, complete_seeds
     from coordinator.experiments.results import read_results
 
     policy, against = sec.need("policy"), sec.need("against")
@@ -292,6 +293,10 @@ def render_paired_runs(sec: Section) -> list[str]:
     return table(["", f"{a_name}, median s", f"{b_name}, median s", f"{a_name} ÷ {b_name} (last row: {a_name} − {b_name}, 95 % CI)"], rows)
 
 
+def _episode(e: dict) -> tuple:
+    return (e["date"], e["hour"], e["seed"], e["policy"])
+
+
 @renderer("cluster-rounds")
 def render_cluster_rounds(sec: Section) -> list[str]:
     """Rounds of one sweep two ways: ``times`` lines ``round N WAY SECONDS``; ``pairs`` of results files that must agree."""
@@ -309,9 +314,8 @@ def render_cluster_rounds(sec: Section) -> list[str]:
     same = 0
     pairs = sec.need("pairs")
     for fa, fb in pairs:
-        key = lambda e: (e["date"], e["hour"], e["seed"], e["policy"])  # noqa: E731 - a one-line sort key
-        ea = {key(e): e["decisions_sha256"] for e in sec.load(fa)["episodes"]}
-        eb = {key(e): e["decisions_sha256"] for e in sec.load(fb)["episodes"]}
+        ea = {_episode(e): e["decisions_sha256"] for e in sec.load(fa)["episodes"]}
+        eb = {_episode(e): e["decisions_sha256"] for e in sec.load(fb)["episodes"]}
         same += ea == eb
     return table(["round", *heads, f"{heads[1]} ÷ {heads[0]}"], rows) + [
         "", f"Same decisions in every episode: {same} of {len(pairs)} rounds."]
