@@ -70,3 +70,17 @@ def test_a_new_kind_registers_from_the_module_a_page_names(tmp_path: Path, monke
             {"word": "surge", "command": "c", "date": "2026-12-06", "machine": "m"})
     assert "SURGE" in results_page.render(tmp_path / "benchmarks")
     results_page.RENDERERS.pop("shout")
+
+
+def test_surge_report_results_page_writes_the_page_and_says_when_it_is_current(tmp_path: Path, capsys) -> None:  # noqa: ANN001 - pytest's fixture
+    from coordinator.cli import main
+
+    _folder(tmp_path / "benchmarks", '[[section]]\ntitle = "T"\nkind = "fields"\nfiles = ["run.json"]\n'
+            'columns = [{head = "x", path = "x"}]\n', {"x": 7, "command": "c", "date": "2026-12-06", "machine": "m"})
+    args = ["report", "--results-page", "--benchmarks", str(tmp_path / "benchmarks"), "--out", str(tmp_path / "docs" / "results.md")]
+    assert main(args) == 0
+    assert "| 7 |" in (tmp_path / "docs" / "results.md").read_text() and "wrote" in capsys.readouterr().out
+    assert main(args) == 0
+    assert "is up to date" in capsys.readouterr().out
+    assert main(["report"]) == 2
+    assert "give a results file (or --results-page)" in capsys.readouterr().err
