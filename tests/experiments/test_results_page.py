@@ -72,7 +72,7 @@ def test_a_new_kind_registers_from_the_module_a_page_names(tmp_path: Path, monke
     results_page.RENDERERS.pop("shout")
 
 
-def test_surge_report_results_page_writes_the_page_and_says_when_it_is_current(tmp_path: Path, capsys) -> None:  # noqa: ANN001 - pytest's fixture
+def test_surge_report_results_page_writes_the_page_and_says_when_it_is_current(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from coordinator.cli import main
 
     _folder(tmp_path / "benchmarks", '[[section]]\ntitle = "T"\nkind = "fields"\nfiles = ["run.json"]\n'
