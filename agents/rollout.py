@@ -405,7 +405,7 @@ def _serial_now(serial: bool, threads: Callable[[], int] | None) -> bool:
     A one-thread share runs the parallel kernel on one thread instead where
     :func:`_threadsafe_regions` allows it: it computes faster than the serial
     kernel (numba compiles the same loop body better inside a parallel
-    region; BENCHMARKS "Session 32").  Agents side by side, in-process
+    region).  Agents side by side, in-process
     (:meth:`agents.rollout_policy.RolloutPolicy._act_waves`) or a fleet's
     processes on one host (:class:`agents.cores.CoreShare`), get it once
     they have run a region; a fleet's agent does when it warms its kernels

@@ -9,7 +9,8 @@ in their defaults.
     only in the agent's sector and its adjacent sectors; forecast ``model``
     by default.  It plans with two approximations by default (``adaptive=2``
     in batches of 50, ``cap=24``): measured free in total cost at 100 and
-    1,000 taxis, and 4–8 times faster (BENCHMARKS.md, "Session 34").
+    1,000 taxis, and 4–8 times faster (benchmarks/approximation-cost/,
+    benchmarks/planning-speed/).
     ``adaptive=none,cap=none`` (:data:`EXACT`) plans exactly, as the paper
     does; ``surge reproduce`` plans so.
 ``garces2023`` (Garces et al. 2023, the paper's baseline 3)

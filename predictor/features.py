@@ -26,8 +26,7 @@ sector for every hour that overlaps ``[start - LEAD_HOURS, end + LAG_HOURS)``
 (recorded in the model; ``surge predictor train --window LEAD,LAG``).  The
 default, 0 and 0, is the paper's literal rule, chosen on the validation
 months: of the windows 0,0, 1,0, 2,1 and 3,2 it gave the system the lowest
-percent error on every sector-hour of July–August, 15–21 h (BENCHMARKS,
-"Event window").  A wider window covers more of an event's taxi demand
+percent error on every sector-hour of July–August, 15–21 h.  A wider window covers more of an event's taxi demand
 (arrivals come before the start, departures after the end) but makes the
 event network predict many more sector-hours, and it predicts them worse.  Adjacent sectors
 (where many arrivals are picked up) are not included: that would make 60 % of

@@ -269,7 +269,7 @@ def versions() -> dict:
 
     from city.fingerprint import machine
 
-    # The host too: the same command on another processor can give other weights (BENCHMARKS, session 20).
+    # The host too: the same command on another processor can give other weights.
     out = {"python": platform.python_version(), "torch": torch.__version__, "numpy": np.__version__,
            "machine": machine(), "cpu_capability": torch.backends.cpu.get_cpu_capability()}
     for mod in ("scipy", "sklearn", "sentence_transformers", "transformers"):

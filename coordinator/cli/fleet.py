@@ -266,7 +266,7 @@ def threads_arg(p) -> None:  # noqa: ANN001
     The default, ``share``, splits the host's cores among the agents of the run
     planning on it at the time (:mod:`agents.cores`): a lone agent plans on
     every core, and independent turns side by side take one share each. A
-    fixed count was measured at 100 agents on 2 cores (BENCHMARKS, issue 12):
+    fixed count was measured at 100 agents on 2 cores:
     one thread each was slower than every core, since most turns wait on a
     predecessor and a lone agent then plans on one core.
     """

@@ -12,17 +12,38 @@ from coordinator.cli.evaluate import print_results
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("report", help="tables, paired comparison and plot from a results file, without rerunning")
-    p.add_argument("results", help="surge.results/1 JSON written by surge evaluate --json")
+    p = sub.add_parser("report", help="tables, paired comparison and plot from a results file, without rerunning; "
+                                      "or, with --results-page, docs/results.md from the committed result files")
+    p.add_argument("results", nargs="?", help="surge.results/1 JSON written by surge evaluate --json")
     p.add_argument("--policy", default=None, help="policy label to pair with the others (default: the first surge label)")
     p.add_argument("--all-seeds", action="store_true",
                    help="keep a seed finished at some hours only (default: seeds finished at every hour)")
     p.add_argument("--json", default=None, help="write the summary and comparison as JSON here")
     p.add_argument("--plot", default=None, help="write a PNG bar chart of total cost per hour and policy here")
+    p.add_argument("--results-page", action="store_true",
+                   help="regenerate the results page from every benchmarks/<question>/page.toml instead (no RESULTS)")
+    p.add_argument("--benchmarks", default="benchmarks", help="with --results-page: the benchmarks folder (default: benchmarks)")
+    p.add_argument("--out", default="docs/results.md", help="with --results-page: the page to write (default: docs/results.md)")
     p.set_defaults(func=cmd_report)
 
 
+def cmd_results_page(args: argparse.Namespace) -> int:
+    from coordinator.experiments.results_page import write
+
+    root, out = Path(args.benchmarks), Path(args.out)
+    if not root.is_dir():
+        raise SurgeError(f"{root}: no benchmarks folder here (run from the repository root, or pass --benchmarks)")
+    print(f"wrote {out}" if write(root, out) else f"{out} is up to date")
+    return 0
+
+
 def cmd_report(args: argparse.Namespace) -> int:
+    if args.results_page:
+        if args.results:
+            raise SurgeError("surge report: give a results file or --results-page, not both")
+        return cmd_results_page(args)
+    if not args.results:
+        raise SurgeError("surge report: give a results file (or --results-page)")
     from coordinator.experiments.analysis import complete_seeds
     from coordinator.experiments.results import read_results
 

@@ -128,7 +128,7 @@ def policy_options(run: Run, labels: list[str]) -> dict[str, dict]:
     Every ``surge`` label plans exactly (:data:`agents.rollout_policy.EXACT`),
     as the paper's method does and as ``garces2023`` does, so that the
     comparisons are like with like; ``surge``'s default approximations are
-    measured apart (BENCHMARKS.md).
+    measured apart (docs/results.md).
     """
     from agents.rollout_policy import pinned_options
     from agents.base import parse_policy

@@ -328,7 +328,7 @@ def write_report(run, scen, docs: dict, pe: dict | None, figs: dict[str, str], s
             cpu = f"{c.mean():.3f} ± {c.std():.3f} ({len(c)} of {len(eps)})" if len(c) else "not recorded"
             rows.append([f"`{p}`", doc_name, f"{v.mean():.3f} ± {v.std():.3f}", cpu, _ms(paper, 2), machines])
     lines += ["Both rollout policies plan exactly here, as in the paper: every `surge` row turns off the approximations "
-              "`surge` plans with by default (`adaptive=none,cap=none`; their speed and cost are measured in BENCHMARKS.md). "
+              "`surge` plans with by default (`adaptive=none,cap=none`; their speed and cost are measured in docs/results.md). "
               "Timings of different machines are not comparable; the verdict compares rows timed on one machine (see above). "
               "Wall seconds include any time the run waited for the processor; CPU seconds (not recorded in older rows) do not, "
               "so the verdict uses the pairs whose two rows have them.", ""]

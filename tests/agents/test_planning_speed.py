@@ -109,7 +109,7 @@ def test_exact_shortcuts_change_no_decision(city: City, base: str) -> None:
 @pytest.mark.parametrize("approx", [{"cap": 4}, {"adaptive": 2.0, "batch": 16, "cap": 6}])
 def test_exact_shortcuts_change_no_decision_under_the_approximations(city: City, approx: dict) -> None:
     # Seed 0 binds the cap where ``reach`` drops taxis: when the cap ranked taxis after ``reach`` had
-    # dropped some, flipping ``reach`` changed a decision here (session 21's finding).
+    # dropped some, flipping ``reach`` changed a decision here.
     assert shortcuts_settled(city, range(2), **approx) > 0
 
 

@@ -3,7 +3,7 @@
 Needs root (or CAP_NET_ADMIN) and iproute2; skipped where the namespaces
 cannot be made.  ``deploy/netns.sh`` builds the three hosts, as a user would;
 the run uses mutual TLS and access control with credentials made for the
-router's address, as ``deploy/README.md`` describes.
+router's address, as ``docs/runtime.md`` describes.
 """
 
 from __future__ import annotations

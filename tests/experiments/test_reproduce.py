@@ -125,7 +125,7 @@ def test_the_protocol_plans_every_surge_label_exactly_and_resumes_the_committed_
         config = policy_class(name).rollout_config(**planner)
         assert config.adaptive is None and config.cap is None, label
     for part in ("main", "ablation"):
-        doc = read_results(Path(__file__).parents[2] / "benchmarks" / "reproduce-quick-synthetic-intel" / f"results-{part}.json")
+        doc = read_results(Path(__file__).parents[2] / "benchmarks" / "paper-protocol" / "quick-synthetic" / f"results-{part}.json")
         model = next(o["model"] for o in doc["config"]["policy_options"].values() if "model" in o)
         quick = Run(out=tmp_path, scenario="synthetic", data=None, protocol=QUICK, model_dir=Path(model))
         assert policy_options(quick, [*doc["config"]["policies"], "oracle"]) == doc["config"]["policy_options"], part
