@@ -10,13 +10,21 @@ and the world and drives the simulator from outside; the policies stay in
 :mod:`agents`.
 
 :class:`FleetAECEnv` is the paper's one-agent-at-a-time rollout order as
-PettingZoo's AEC model: in every minute ``agent_selection`` walks the free
-taxis in index order; each sees its predecessors' committed controls; when
-the last free taxi has acted, the joint control (busy taxis take their next
-hop) is applied and the minute's stage cost is every agent's reward, with a
-minus sign.  Minutes in which no taxi is free are played through at once.
+PettingZoo's AEC model: in every minute ``agent_selection`` walks every taxi
+in index order (a busy taxi's mask offers only slot 0, its forced next hop);
+each sees its predecessors' committed controls; when the last taxi has acted,
+the joint control is applied and the minute's stage cost is every agent's
+reward, with a minus sign.  Because every minute is one full cycle of all
+agents, PettingZoo's ``aec_to_parallel`` wrapper accepts it
+(``is_parallelizable``), though the AEC env's observations differ from the
+parallel env's: they count the predecessors' controls.
 
 :class:`FleetParallelEnv` lets every taxi choose at once, one step a minute.
+
+Both have ``state()`` and a Box ``state_space`` for centralised critics (the
+layout is in :mod:`coordinator.env_view`), and ``render()`` draws the map:
+``render_mode="rgb_array"`` returns an image, ``"human"`` opens a window
+where a display exists.
 
 Actions are slots of a taxi's control set: 0 stays (a busy taxi: its forced
 next hop), 1 picks up the oldest request waiting at the taxi's
@@ -33,6 +41,9 @@ all non-negative::
              control ends at that slot's node (slot 1: picking up here) / fleet size
     [18+K:]  the forecast rate η (requests a minute) of the taxi's sector and
              the sum over its local sectors (itself and adjacent ones)
+
+K is ``2 + `` the city's largest out-degree (the action count).  The
+parallel env's observations leave the predecessor counts at 0.
 
 Example::
 
@@ -63,6 +74,7 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 
 from agents.forecast import make_provider
 from city.sim import PICKUP, FleetSim
+from coordinator import env_view
 from coordinator.evaluate import episode_requests, initial_positions
 
 STAY, PICK = 0, 1
@@ -207,6 +219,23 @@ class _Episode:
         self.obs = self.sim.observe()
         return cost
 
+    def state_space(self) -> gymnasium.spaces.Box:
+        low, high = env_view.state_bounds(self.config.taxis, self.city.n_sectors)
+        return gymnasium.spaces.Box(low, high, dtype=np.float32)
+
+    def state(self) -> np.ndarray:
+        return env_view.global_state(self.city, self.unit_xy, self.obs, self.eta(), self.max_hops, self.config.minutes)
+
+    def render(self, mode: str | None, window: dict) -> np.ndarray | None:
+        """The map for ``render()``: an image in ``rgb_array`` mode, a window in ``human`` mode, nothing without a mode."""
+        if mode is None or self.sim is None:
+            return None
+        title = f"{self.config.scenario} {self.config.date} {self.config.hour}:00 +{self.minute} min, cost so far {self.total_cost}"
+        if mode == "human":
+            env_view.show(self.city, self.obs, title, window)
+            return None
+        return env_view.draw(self.city, self.obs, title)
+
     def spaces(self) -> tuple[gymnasium.spaces.Space, gymnasium.spaces.Space]:
         obs = gymnasium.spaces.Dict({
             "observation": gymnasium.spaces.Box(0.0, np.inf, (self.obs_size,), np.float32),
@@ -220,20 +249,22 @@ def _agents(n: int) -> list[str]:
 
 
 class FleetAECEnv(AECEnv):
-    """The fleet as an AEC game: free taxis act one at a time, in index order, every minute; see the module docstring."""
+    """The fleet as an AEC game: every taxi acts in index order every minute, free ones choosing; see the module docstring."""
 
-    metadata = {"name": "surge_fleet_aec_v0", "render_modes": [], "is_parallelizable": True}
+    metadata = {"name": "surge_fleet_aec_v0", "render_modes": env_view.render_modes(), "is_parallelizable": True, "render_fps": 4}
 
-    def __init__(self, config: EnvConfig | None = None, **kwargs: Any) -> None:
+    def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None, **kwargs: Any) -> None:
         super().__init__()
         self.config = config or EnvConfig(**kwargs)
+        self.render_mode = env_view.check_render_mode(render_mode)
         self.episode = _Episode(self.config)
         self.possible_agents = _agents(self.config.taxis)
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
         obs_space, act_space = self.episode.spaces()
         self.observation_spaces = {a: obs_space for a in self.possible_agents}
         self.action_spaces = {a: act_space for a in self.possible_agents}
-        self.render_mode = None
+        self.state_space = self.episode.state_space()
+        self._window: dict = {}
 
     def observation_space(self, agent: str) -> gymnasium.spaces.Space:
         return self.observation_spaces[agent]
@@ -255,6 +286,13 @@ class FleetAECEnv(AECEnv):
         """The action that plays ``control`` (a node id or ``city.sim.PICKUP``) for ``agent`` now."""
         return self.episode.action_of(self._index[agent], control)
 
+    def state(self) -> np.ndarray:
+        """The global state of :mod:`coordinator.env_view` (every taxi, waiting requests and forecast per sector)."""
+        return self.episode.state()
+
+    def render(self) -> np.ndarray | None:
+        return self.episode.render(self.render_mode, self._window)
+
     def reset(self, seed: int | None = None, options: dict | None = None) -> None:
         self.episode.start(0 if seed is None else int(seed))
         self.agents = list(self.possible_agents)
@@ -263,20 +301,10 @@ class FleetAECEnv(AECEnv):
         self.terminations = {a: False for a in self.agents}
         self.truncations = {a: False for a in self.agents}
         self.infos = {a: {} for a in self.agents}
-        self._begin_minute()
-
-    def _begin_minute(self) -> None:
-        """Play through minutes with no free taxi; then queue this minute's free taxis in index order."""
-        ep = self.episode
-        while not ep.done() and not (ep.obs.tau == 0).any():
-            self._add_cost(ep.step(ep.obs.pos.copy()))
-        if ep.done():
-            self.truncations = {a: True for a in self.agents}
-            self.agent_selection = self.agents[0]
-            return
-        self._queue = [self.possible_agents[i] for i in np.flatnonzero(ep.obs.tau == 0)]
         self._committed: dict[int, int] = {}
-        self.agent_selection = self._queue[0]
+        self.agent_selection = self.agents[0]
+        if self.render_mode == "human":
+            self.render()
 
     def _add_cost(self, cost: int) -> None:
         for a in self.agents:
@@ -296,36 +324,40 @@ class FleetAECEnv(AECEnv):
         self._cumulative_rewards[agent] = 0.0
         i = self._index[agent]
         self._committed[i] = self.episode.control(i, action)
-        self._queue.pop(0)
-        if self._queue:
-            self.agent_selection = self._queue[0]
+        if i + 1 < len(self.possible_agents):
+            self.agent_selection = self.possible_agents[i + 1]
         else:
             ep = self.episode
-            controls = ep.obs.pos.copy()
-            for j, u in self._committed.items():
-                controls[j] = u
+            controls = np.array([self._committed[j] for j in range(len(self.possible_agents))], dtype=np.int32)
             self._add_cost(ep.step(controls))
-            self._begin_minute()
+            self._committed = {}
+            self.agent_selection = self.possible_agents[0]
+            if ep.done():
+                self.truncations = {a: True for a in self.agents}
+            if self.render_mode == "human":
+                self.render()
         self._accumulate_rewards()
 
     def close(self) -> None:
-        pass
+        env_view.close(self._window)
 
 
 class FleetParallelEnv(ParallelEnv):
     """The fleet with every taxi choosing at once, one step a minute; see the module docstring."""
 
-    metadata = {"name": "surge_fleet_parallel_v0", "render_modes": []}
+    metadata = {"name": "surge_fleet_parallel_v0", "render_modes": env_view.render_modes(), "render_fps": 4}
 
-    def __init__(self, config: EnvConfig | None = None, **kwargs: Any) -> None:
+    def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None, **kwargs: Any) -> None:
         self.config = config or EnvConfig(**kwargs)
+        self.render_mode = env_view.check_render_mode(render_mode)
         self.episode = _Episode(self.config)
         self.possible_agents = _agents(self.config.taxis)
         obs_space, act_space = self.episode.spaces()
         self.observation_spaces = {a: obs_space for a in self.possible_agents}
         self.action_spaces = {a: act_space for a in self.possible_agents}
-        self.render_mode = None
+        self.state_space = self.episode.state_space()
         self.agents: list[str] = []
+        self._window: dict = {}
 
     def observation_space(self, agent: str) -> gymnasium.spaces.Space:
         return self.observation_spaces[agent]
@@ -337,12 +369,21 @@ class FleetParallelEnv(ParallelEnv):
     def total_cost(self) -> int:
         return self.episode.total_cost
 
+    def state(self) -> np.ndarray:
+        """The global state of :mod:`coordinator.env_view` (every taxi, waiting requests and forecast per sector)."""
+        return self.episode.state()
+
+    def render(self) -> np.ndarray | None:
+        return self.episode.render(self.render_mode, self._window)
+
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
         return {a: self.episode.observe(i, {}) for i, a in enumerate(self.possible_agents)}
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         self.episode.start(0 if seed is None else int(seed))
         self.agents = list(self.possible_agents)
+        if self.render_mode == "human":
+            self.render()
         return self._observations(), {a: {} for a in self.agents}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
@@ -358,8 +399,9 @@ class FleetParallelEnv(ParallelEnv):
         infos = {a: {} for a in agents}
         if truncated:
             self.agents = []
+        if self.render_mode == "human":
+            self.render()
         return obs, rewards, terminations, truncations, infos
 
     def close(self) -> None:
-        pass
-
+        env_view.close(self._window)
