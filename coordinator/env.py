@@ -81,6 +81,7 @@ STAY, PICK = 0, 1
 NEAR_REQUESTS = 4
 OWN_FEATURES = 6
 FORECAST_FEATURES = 2
+FIRST_DRAWN_SEED = 1000
 
 
 @dataclass(frozen=True)
@@ -123,9 +124,21 @@ class _Episode:
         self.unit_xy = (self.city.xy - lo) / np.where(hi > lo, hi - lo, 1.0)
         self._eta_hour: int | None = None
         self.sim: FleetSim | None = None
+        self._seeds = np.random.default_rng(0)
 
-    def start(self, seed: int) -> None:
-        self.sim = FleetSim(self.city, self.requests, initial_positions(self.city, self.config.taxis, seed))
+    def start(self, seed: int | None) -> None:
+        """Place the fleet as evaluate's ``seed`` does; without a seed, draw the next one of a stream.
+
+        The stream is seeded by the last explicit seed (0 before any) and draws
+        seeds from :data:`FIRST_DRAWN_SEED` up, apart from the test protocol's
+        seeds 0-24, so that vectorised training, which resets without seeds,
+        meets a new placement each episode.
+        """
+        if seed is None:
+            seed = int(self._seeds.integers(FIRST_DRAWN_SEED, 2**31 - 1))
+        else:
+            self._seeds = np.random.default_rng(seed)
+        self.sim = FleetSim(self.city, self.requests, initial_positions(self.city, self.config.taxis, int(seed)))
         self.obs = self.sim.observe()
         self.total_cost = 0
 
@@ -294,7 +307,7 @@ class FleetAECEnv(AECEnv):
         return self.episode.render(self.render_mode, self._window)
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> None:
-        self.episode.start(0 if seed is None else int(seed))
+        self.episode.start(seed)
         self.agents = list(self.possible_agents)
         self.rewards = {a: 0.0 for a in self.agents}
         self._cumulative_rewards = {a: 0.0 for a in self.agents}
@@ -369,6 +382,15 @@ class FleetParallelEnv(ParallelEnv):
     def total_cost(self) -> int:
         return self.episode.total_cost
 
+    @property
+    def sim(self) -> FleetSim:
+        assert self.episode.sim is not None, "reset() first"
+        return self.episode.sim
+
+    def action_of(self, agent: str, control: int) -> int:
+        """The action that plays ``control`` (a node id or ``city.sim.PICKUP``) for ``agent`` now."""
+        return self.episode.action_of(self.possible_agents.index(agent), control)
+
     def state(self) -> np.ndarray:
         """The global state of :mod:`coordinator.env_view` (every taxi, waiting requests and forecast per sector)."""
         return self.episode.state()
@@ -380,7 +402,7 @@ class FleetParallelEnv(ParallelEnv):
         return {a: self.episode.observe(i, {}) for i, a in enumerate(self.possible_agents)}
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
-        self.episode.start(0 if seed is None else int(seed))
+        self.episode.start(seed)
         self.agents = list(self.possible_agents)
         if self.render_mode == "human":
             self.render()
