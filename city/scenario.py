@@ -216,7 +216,7 @@ def share_from_env() -> float | None:
     return share
 
 
-def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 2022, seed: int = 0, share: float | None = None) -> Scenario:
+def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int | None = None, seed: int = 0, share: float | None = None) -> Scenario:
     """The city and its demand world.
 
     ``synthetic`` generates everything.  A scenario file's world replays its
@@ -228,9 +228,12 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
     come from its files when it names them.  ``share`` (default
     ``$SURGE_SHARE``) overrides the file's share of its trips; on a
     synthesised world it scales base demand and event trips (default
-    :data:`city.demand.profile.FLEET_SHARE`).
+    :data:`city.demand.profile.FLEET_SHARE`).  ``year`` is the demand
+    world's (commands pass their dates' year); by default the file's
+    ``year`` key, else 2022.
     """
     spec = scenario_spec(name, data_dir)
+    year = year if year is not None else (spec.year if spec is not None else 2022)
     city = load_city(name, data_dir)
     from city.demand import synthetic_world
     from city.demand.profile import FLEET_SHARE
@@ -243,7 +246,7 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
     return Scenario(name=name, city=city, world=world, data_dir=spec.data_dir, spec=spec, schedules=world.schedules)
 
 
-def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int = 0, share: float | None = None) -> object:
+def build_world(spec: ScenarioSpec, city: City, *, year: int, seed: int = 0, share: float | None = None) -> object:
     """The demand world of a scenario file on its city.
 
     The first ``[[trips]]`` entry with files is used; ``share`` (a command's
@@ -251,9 +254,11 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
     ``[occupancy]`` schedules go into the world.
     """
     from city.demand import RecordedWorld, synthetic_world
+    from city.demand.naming import naming_for
     from city.demand.profile import FLEET_SHARE
 
     calendar = {"holidays": (spec.holidays["country"], spec.holidays["subdiv"]), "schedules": None}
+    naming = naming_for(spec.event_names, spec.name)
     if spec.occupancy is not None:
         from city.occupancy import read_occupancy_csv
 
@@ -272,7 +277,7 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
     if trips is not None and trips.kind == "zone-od":
         profile = load_zone_profile(trips.files[0], city)
         return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, zone_profile=profile,
-                               share=share or trips.share or FLEET_SHARE, **calendar)
+                               share=share or trips.share or FLEET_SHARE, naming=naming, **calendar)
     if trips is not None:
         from city.trips import read_fhvhv
 
@@ -282,7 +287,7 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
             table = sample_trips(table, keep, seed)
         return RecordedWorld(city, table, year=year, seed=seed, events=read_scenario_events(spec, city), weather=weather, pois=pois,
                              **calendar)
-    return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, share=share or FLEET_SHARE, **calendar)
+    return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, share=share or FLEET_SHARE, naming=naming, **calendar)
 
 
 def sample_trips(table, share: float, seed: int):  # noqa: ANN001, ANN201

@@ -99,11 +99,11 @@ class EnvConfig:
 
 
 @functools.lru_cache(maxsize=4)
-def _load_scenario(name: str, data_dir: str | None, world_seed: int):  # noqa: ANN202
+def _load_scenario(name: str, data_dir: str | None, world_seed: int, year: int):  # noqa: ANN202
     """Scenarios built once per process: environments are made and remade many times (vectorised envs, tests)."""
     from city.scenario import load_scenario
 
-    return load_scenario(name, data_dir, seed=world_seed)
+    return load_scenario(name, data_dir, year=year, seed=world_seed)
 
 
 class _Episode:
@@ -111,9 +111,9 @@ class _Episode:
 
     def __init__(self, config: EnvConfig) -> None:
         self.config = config
-        scen = _load_scenario(config.scenario, config.data_dir, config.world_seed)
-        self.city, self.world = scen.city, scen.world
         self.date = dt.date.fromisoformat(config.date)
+        scen = _load_scenario(config.scenario, config.data_dir, config.world_seed, self.date.year)
+        self.city, self.world = scen.city, scen.world
         self.requests = episode_requests(self.world, self.date, config.hour, config.minutes)
         self.provider = make_provider(config.forecast)
         degree = np.diff(self.city.indptr)

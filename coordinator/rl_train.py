@@ -1,12 +1,13 @@
 """Train one policy shared by every taxi on :class:`coordinator.env.FleetParallelEnv`, and compare it with greedy.
 
-The RL library is Stable-Baselines3 (PPO), fed through SuperSuit, which turns
-the PettingZoo parallel environment into a vector environment with one slot
-per taxi, so one network is trained on every taxi's experience (parameter
-sharing), with the shared team reward (minus the requests waiting each
-minute).  The agents see :class:`FleetParallelEnv`'s observation vector with
-its action mask appended; a masked slot plays as "stay", so the policy needs
-no masking of its own.  ``pip install 'surge[rl]'``.
+The RL library is Stable-Baselines3 with its contrib package's maskable PPO,
+fed through SuperSuit, which turns the PettingZoo parallel environment into a
+vector environment with one slot per taxi, so one network is trained on every
+taxi's experience (parameter sharing), with the shared team reward (minus the
+requests waiting each minute).  The network reads :class:`FleetParallelEnv`'s
+observation vector with its action mask appended, and the mask also limits
+the policy's choice to the slots that exist (:class:`ObservedMasks` hands it
+to maskable PPO).  ``pip install 'surge[rl]'``.
 
 Training episodes place the fleet by the environment's drawn seeds (1000 and
 up) on ``train_date``; the learning curve and the final comparison play the
@@ -32,12 +33,12 @@ import gymnasium
 try:
     import supersuit as ss
     import torch
-    from stable_baselines3 import PPO
+    from sb3_contrib import MaskablePPO
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.utils import set_random_seed
-    from stable_baselines3.common.vec_env import VecNormalize
+    from stable_baselines3.common.vec_env import VecEnvWrapper, VecNormalize
 except ImportError as exc:  # pragma: no cover - exercised only without the extra
-    raise ImportError("coordinator.rl_train needs Stable-Baselines3 and SuperSuit: pip install 'surge[rl]'") from exc
+    raise ImportError("coordinator.rl_train needs Stable-Baselines3, sb3-contrib and SuperSuit: pip install 'surge[rl]'") from exc
 
 from agents.greedy import greedy_controls
 from city.fingerprint import machine
@@ -84,6 +85,33 @@ def _flat_space(space: gymnasium.spaces.Dict) -> gymnasium.spaces.Box:
     return gymnasium.spaces.Box(low, high, dtype=np.float32)
 
 
+class ObservedMasks(VecEnvWrapper):
+    """Answers maskable PPO's ``action_masks`` from the last observations, whose tail is the mask (:func:`flat`)."""
+
+    def __init__(self, venv, slots: int) -> None:  # noqa: ANN001 - SuperSuit's SB3 vector env
+        super().__init__(venv)
+        self.slots = slots
+        self.last: np.ndarray | None = None
+
+    def reset(self) -> np.ndarray:
+        self.last = self.venv.reset()
+        return self.last
+
+    def step_wait(self):  # noqa: ANN201 - SB3's VecEnvStepReturn
+        obs, rewards, dones, infos = self.venv.step_wait()
+        self.last = obs
+        return obs, rewards, dones, infos
+
+    def has_attr(self, attr_name: str) -> bool:
+        return attr_name == "action_masks" or self.venv.has_attr(attr_name)
+
+    def env_method(self, method_name: str, *args, indices=None, **kwargs) -> list:  # noqa: ANN001, ANN002, ANN003 - SB3's signature
+        if method_name != "action_masks":
+            return self.venv.env_method(method_name, *args, indices=indices, **kwargs)
+        assert self.last is not None, "reset() first"
+        return list(self.last[:, -self.slots :] > 0.5)
+
+
 def vector_env(cfg: TrainConfig) -> VecNormalize:
     """The training environment: every taxi is one slot of an SB3 vector env.
 
@@ -92,19 +120,21 @@ def vector_env(cfg: TrainConfig) -> VecNormalize:
     """
     env = FleetParallelEnv(cfg.env(cfg.train_date))
     env = ss.observation_lambda_v0(env, lambda obs, _space: flat(obs), lambda space: _flat_space(space))
+    slots = env.action_space(env.possible_agents[0]).n
     vec = ss.concat_vec_envs_v1(ss.pettingzoo_env_to_vec_env_v1(env), 1, num_cpus=0, base_class="stable_baselines3")
     with warnings.catch_warnings():
         # SuperSuit's vector env answers no get_attr("render_mode"); SB3 then warns and takes None, which is right here.
         warnings.filterwarnings("ignore", message="The `render_mode` attribute is not defined")
-        return VecNormalize(vec, norm_obs=False, norm_reward=True, gamma=cfg.ppo.get("gamma", 0.99))
+        return VecNormalize(ObservedMasks(vec, slots), norm_obs=False, norm_reward=True, gamma=cfg.ppo.get("gamma", 0.99))
 
 
-def model_policy(model: PPO) -> Policy:
-    """Every taxi's action from the shared network, deterministically."""
+def model_policy(model: MaskablePPO) -> Policy:
+    """Every taxi's most likely action under the shared network, among the slots that exist."""
 
     def act(env: FleetParallelEnv, obs: dict) -> dict:
         batch = np.stack([flat(obs[a]) for a in env.agents])
-        actions, _ = model.predict(batch, deterministic=True)
+        masks = np.stack([obs[a]["action_mask"] > 0 for a in env.agents])
+        actions, _ = model.predict(batch, deterministic=True, action_masks=masks)
         return dict(zip(env.agents, (int(a) for a in actions)))
 
     return act
@@ -163,14 +193,14 @@ def paired_summary(mine: list[dict], other: list[dict]) -> dict:
             "ties": int((diff == 0).sum()), "n": int(diff.size)}
 
 
-def train(cfg: TrainConfig, command: str = "", log: Callable[[str], None] = print) -> tuple[PPO, dict]:
+def train(cfg: TrainConfig, command: str = "", log: Callable[[str], None] = print) -> tuple[MaskablePPO, dict]:
     """Train the shared policy; the results document (curve, final costs, paired differences against greedy and stay)."""
     torch.set_num_threads(cfg.threads)
     set_random_seed(cfg.seed)
     vec = vector_env(cfg)
     # Seeded through set_random_seed, not PPO(seed=...): SuperSuit's SB3 wrapper has no VecEnv.seed.
     batch_size = max(2, cfg.ppo["n_steps"] * cfg.taxis // cfg.minibatches)
-    model = PPO("MlpPolicy", vec, verbose=0, device="cpu", batch_size=batch_size, **cfg.ppo)
+    model = MaskablePPO("MlpPolicy", vec, verbose=0, device="cpu", batch_size=batch_size, **cfg.ppo)
     model.action_space.seed(cfg.seed)
     curve = _Curve(cfg, log)
     start = time.perf_counter()
@@ -185,7 +215,7 @@ def train(cfg: TrainConfig, command: str = "", log: Callable[[str], None] = prin
         "command": command,
         "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
         "machine": machine(),
-        "library": {"stable_baselines3": _version("stable_baselines3"), "supersuit": _version("supersuit"),
+        "library": {"stable_baselines3": _version("stable_baselines3"), "sb3_contrib": _version("sb3_contrib"), "supersuit": _version("supersuit"),
                     "pettingzoo": _version("pettingzoo"), "torch": torch.__version__},
         "config": asdict(cfg),
         "train_seconds": round(seconds, 1),
@@ -214,7 +244,7 @@ def plot(doc: dict, path: Path) -> None:
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     xs = [p["timesteps"] for p in doc["curve"]]
-    ax.plot(xs, [p["mean_total_cost"] for p in doc["curve"]], marker="o", label="PPO, shared policy")
+    ax.plot(xs, [p["mean_total_cost"] for p in doc["curve"]], marker="o", label="maskable PPO, shared policy")
     for name, style in (("greedy", "--"), ("stay", ":")):
         ax.axhline(doc["mean_total_cost"][name], linestyle=style, color="k" if name == "greedy" else "0.5", label=name)
     cfg = doc["config"]

@@ -23,6 +23,7 @@ from city.demand.climate import synthetic_weather
 from city.demand.dates import HOLIDAY_COUNTRY, day_kind
 from city.demand.geography import busyness, find_anchors, gravity_od, intensity_and_tilt, locale_counts
 from city.demand.profile import FLEET_SHARE, base_rate, profile_base_rate
+from city.demand.naming import NEW_YORK, Naming
 from city.demand.venues import make_venues, schedule
 from city.demand.world import DemandWorld, HourTrips, check_seed_year
 from city.errors import ConfigError
@@ -67,6 +68,10 @@ class SyntheticWorld(DemandWorld):
     schedules : dict, optional
         Occupancy schedules (:func:`city.occupancy.read_occupancy_csv`) for the assignment of
         requests to intersections; the built-in DOE ones otherwise.
+    naming : Naming
+        The venues', teams' and flagship shows' names (:mod:`city.demand.naming`); New York's by
+        default, a city's own with :func:`city.demand.naming.neutral`.  Only words change: the
+        events' times, places and attendance are the same.
     """
 
     def __init__(
@@ -81,6 +86,7 @@ class SyntheticWorld(DemandWorld):
         share: float = FLEET_SHARE,
         holidays: tuple[str, str | None] = (HOLIDAY_COUNTRY, None),
         schedules: dict | None = None,
+        naming: Naming = NEW_YORK,
     ) -> None:
         check_seed_year(seed, year)
         if not demand_scale > 0:
@@ -97,8 +103,8 @@ class SyntheticWorld(DemandWorld):
         self.intensity, tilt = intensity_and_tilt(city, busy, counts, self.anchors)
         self.demand_scale = float(demand_scale)
         self.share = float(share)
-        venues = make_venues(city, self.anchors, busy, np.random.default_rng([seed, 13]))
-        specs = schedule(venues, year, np.random.default_rng([seed, 14]))
+        venues = make_venues(city, self.anchors, busy, np.random.default_rng([seed, 13]), naming)
+        specs = schedule(venues, year, np.random.default_rng([seed, 14]), naming)
         events, specs = write_events(specs, venues, random.Random(f"surge-texts-{seed}"))
         events, attendance = draw_attendance(specs, events, venues, weather, seed)
         super().__init__(city, year, seed, venues, events, weather, counts, pois, notes, holidays=holidays, schedules=schedules)
