@@ -80,6 +80,14 @@ def scenario_spec(name: str, data_dir: Path | str | None = None, *, validate: bo
     return read_scenario_file(path, data_dir, validate=validate)
 
 
+def scenario_timezone(name: str, data_dir: Path | str | None = None) -> str:
+    """The zone a scenario's local times are in, for every events file read for it (``synthetic``: New York's)."""
+    from city.events import DEFAULT_TZ
+
+    spec = scenario_spec(name, data_dir, validate=False)
+    return spec.timezone if spec is not None else DEFAULT_TZ
+
+
 def check_scenario(name: str, data_dir: Path | str | None) -> Path | None:
     """Validate a scenario (its whole file, if any) and its data directory; the data directory it uses.
 

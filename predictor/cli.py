@@ -98,7 +98,7 @@ def _window(text: str) -> tuple[int, int]:
 
 # ---------------------------------------------------------------- handlers
 def train_main(args) -> int:
-    from city.scenario import check_scenario
+    from city.scenario import check_scenario, scenario_timezone
     from predictor.inputs import load_world, record_inputs
     from predictor.cluster import Q_MAX
     from predictor.features import LAG_HOURS, LEAD_HOURS
@@ -117,12 +117,16 @@ def train_main(args) -> int:
     check_scenario(args.scenario, args.data)
     t0 = time.perf_counter()
     world, trips = load_world(args.scenario, args.data, seed=args.world_seed, year=args.year, events=args.events, reviews=args.reviews, trips=args.trips)
+    timezone = scenario_timezone(args.scenario, args.data)
     log_line(f"world: scenario {args.scenario}, {world.city.n_sectors} sectors, {len(world.events)} events, built in {time.perf_counter() - t0:.1f}s")
+    for line in input_lines(world, trips, args, timezone):
+        log_line(line)
     scenario = {
         "name": args.scenario,
         "data_dir": str(Path(args.data).resolve()) if args.data else None,
         "world_seed": args.world_seed,
         "year": args.year,
+        "timezone": timezone,
     }
     Path(args.out).mkdir(parents=True, exist_ok=True)
     inputs = record_inputs(args.out, events=args.events, reviews=args.reviews, trips=args.trips)
@@ -147,6 +151,21 @@ def train_main(args) -> int:
         log=log_line,
     )
     return 0
+
+
+def input_lines(world, trips, args, timezone: str) -> list[str]:  # noqa: ANN001 - a demand world, a TripTable, parsed flags
+    """What training read, one line each: the events and the trips (files, rows kept and dropped) or the world's own."""
+    if args.events:
+        events = f"events: {len(world.events)} from {args.events}" + (f" with reviews from {args.reviews}" if args.reviews else "")
+        events += f", local times in {timezone}"
+    else:
+        events = f"events: the scenario world's own ({len(world.events)})"
+    if trips is not None:
+        files = ", ".join(str(p) for p in args.trips)
+        line = f"trips: {len(trips):,} kept of {trips.n_read:,} rows read from {files} ({trips.n_dropped:,} dropped: outside the city or without a time)"
+    else:
+        line = "trips: none read; hourly counts are the scenario world's own"
+    return [events, line]
 
 
 def eval_main(args) -> int:
