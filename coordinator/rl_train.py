@@ -1,4 +1,4 @@
-"""Train one policy shared by every taxi on :class:`coordinator.env.FleetParallelEnv`, and compare it with greedy.
+"""Train one policy shared by every taxi on :class:`coordinator.rl_env.FleetParallelEnv`, and compare it with greedy.
 
 The RL library is Stable-Baselines3 with its contrib package's maskable PPO,
 fed through SuperSuit, which turns the PettingZoo parallel environment into a
@@ -42,8 +42,8 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 
 from agents.greedy import greedy_controls
 from city.fingerprint import machine
-from coordinator.analysis import bootstrap_ci
-from coordinator.env import EnvConfig, FleetParallelEnv
+from coordinator.experiments.analysis import bootstrap_ci
+from coordinator.rl_env import EnvConfig, FleetParallelEnv
 
 Policy = Callable[[FleetParallelEnv, dict], dict]
 

@@ -20,9 +20,9 @@ from city import texts
 from city.demand.dates import evaluation_date
 from city.demand.geography import random_nodes
 from city.demand.naming import NEW_YORK, Naming
-from city.events import Venue
 from city.graph import City
-from city.weather import hours_in_year
+from city.io.events import Venue
+from city.io.weather import hours_in_year
 
 VENUE_PLAN: tuple[tuple[str, int, int, int], ...] = (
     # (kind, count, min capacity, max capacity)
