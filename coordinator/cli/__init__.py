@@ -14,6 +14,7 @@ import sys
 import warnings
 
 from city.errors import SurgeError
+from coordinator.cli.options import SurgeParser
 from coordinator.cli import (
     bench,
     city,
@@ -28,8 +29,8 @@ from coordinator.cli import (
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="surge", description="Event-aware routing for autonomous taxi fleets.")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser = SurgeParser(prog="surge", description="Event-aware routing for autonomous taxi fleets.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=SurgeParser)
     for module in (evaluate, report, city, demand, demo, bench, fleet, reproduce, predictor):
         module.add_parser(sub)
     return parser

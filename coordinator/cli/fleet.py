@@ -14,8 +14,10 @@ from bus.keys import Keys
 from bus.router import router_main
 from city.errors import ConfigError
 from coordinator.cli.options import (
+    forecast_name,
     hour,
     iso_date,
+    model_dir,
     positive,
     rollout_options,
     scenario_args,
@@ -40,8 +42,8 @@ def fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  # 
     p.add_argument("--seed", type=int, default=0, help="initial placement seed (as surge evaluate's seeds)")
     p.add_argument("--world-seed", type=int, default=0)
     p.add_argument("--policy", default="surge", help="rollout policy: surge or garces2023, with options as in evaluate")
-    p.add_argument("--forecast", default=None, help="forecast provider for surge (true-rate, previous-hour, model)")
-    p.add_argument("--model", default=None, help="trained predictor directory for --forecast model")
+    p.add_argument("--forecast", type=forecast_name, default=None, help="forecast provider for surge (true-rate, previous-hour, model)")
+    p.add_argument("--model", type=model_dir, default=None, help="trained predictor directory for --forecast model")
     p.add_argument("--horizon", type=positive, default=None)
     p.add_argument("--samples", type=positive, default=samples)
     p.add_argument("--deadline", type=float, default=30.0, help="seconds an agent has for its turn before the base control is used")

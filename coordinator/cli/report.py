@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from city.errors import SurgeError
+from city.errors import DataError, SurgeError
 from coordinator.cli.evaluate import print_results
 
 
@@ -23,11 +23,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from coordinator.experiments.analysis import complete_seeds
     from coordinator.experiments.results import read_results
 
     path = Path(args.results)
     doc = read_results(path)
+    try:
+        return _report(doc, path, args)
+    except SurgeError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise DataError(f"a field of this results document cannot be reported ({type(exc).__name__}: {exc})", path=path) from exc
+
+
+def _report(doc: dict, path: Path, args: argparse.Namespace) -> int:
+    from coordinator.experiments.analysis import complete_seeds
+
     full = doc if args.all_seeds else complete_seeds(doc)
     if not full["episodes"]:
         raise SurgeError(f"{path}: no seed is finished at every hour (use --all-seeds)")
