@@ -21,6 +21,7 @@ from coordinator.cli.options import (
     positive,
     rollout_options,
     scenario_args,
+    tcp_port,
 )
 from coordinator.fleet import (
     agent_context,
@@ -145,7 +146,7 @@ def cmd_fleet(args) -> int:  # noqa: ANN001
                "secured: mutual TLS and access control, with credentials made for this run")
     print(f"starting {roles} and {cfg.taxis} agent processes on loopback, {how}", file=sys.stderr, flush=True)
     result = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs, run_dir=run_dir, resume=args.resume is not None,
-                             agent_threads=args.threads)
+                             agent_threads=args.threads, port=args.port)
     if args.check:
         print("running the same instance in-process to compare decisions", file=sys.stderr, flush=True)
         ref = in_process(cfg)
@@ -296,6 +297,7 @@ def add_parser(sub) -> None:  # noqa: ANN001
     fleet_args(p, taxis=8, minutes=20, samples=None)
     _grace_arg(p)
     p.add_argument("--check", action="store_true", help="also run the instance in-process and compare the decisions")
+    p.add_argument("--port", type=tcp_port, default=None, help="the loopback router's TCP port (default: a free one)")
     threads_arg(p)
     _checkpoint_args(p, "fleet")
     add_security_args(p)

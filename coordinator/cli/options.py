@@ -46,6 +46,17 @@ def forecast_name(text: str) -> str:
     return text
 
 
+def tcp_port(text: str) -> int:
+    """An argparse type: a TCP port, 1..65535."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid port {text!r}") from None
+    if not 1 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"port {v} is outside 1..65535")
+    return v
+
+
 def model_dir(text: str) -> str:
     """An argparse type: a trained predictor's directory (it holds model.json), checked whichever policies run."""
     if not (Path(text) / "model.json").is_file():

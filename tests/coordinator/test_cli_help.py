@@ -79,3 +79,19 @@ def test_report_answers_a_bad_results_file_in_one_line(mutate, tmp_path: Path, c
     assert main(["report", str(bad)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"surge: error: {bad}") and "\n" not in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("command", ["fleet", "demo"])
+def test_port_flag_is_checked_before_anything_starts(command: str, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        extra = ["--taxis", "2", "--minutes", "2"] + (["--out", str(tmp_path / "demo")] if command == "demo" else [])
+        assert main([command, "--insecure", "--port", str(port), *extra]) == 2
+    assert f"--port {port}: cannot listen on 127.0.0.1:{port}" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([command, "--port", "70000"])
+    assert "port 70000 is outside 1..65535" in capsys.readouterr().err
