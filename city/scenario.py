@@ -47,9 +47,19 @@ class Scenario:
     schedules: dict | None = None
 
 
+def cache_root() -> Path:
+    """The surge cache root, not created: ``$SURGE_CACHE``, else the platform's user cache folder (``~/.cache/surge`` on Linux)."""
+    env = os.environ.get("SURGE_CACHE")
+    if env:
+        return Path(env).expanduser()
+    from platformdirs import user_cache_path
+
+    return user_cache_path("surge", appauthor=False)
+
+
 def cache_dir() -> Path:
-    """Where built artefacts live: ``$SURGE_CACHE`` or ``~/.cache/surge``."""
-    path = Path(os.environ.get("SURGE_CACHE", Path.home() / ".cache" / "surge"))
+    """Where built artefacts live (:func:`cache_root`), created if need be."""
+    path = cache_root()
     path.mkdir(parents=True, exist_ok=True)
     return path
 
