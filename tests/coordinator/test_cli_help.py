@@ -82,8 +82,14 @@ def test_report_answers_a_bad_results_file_in_one_line(mutate, tmp_path: Path, c
 
 
 @pytest.mark.parametrize("command", ["fleet", "demo"])
-def test_port_flag_is_checked_before_anything_starts(command: str, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_port_flag_is_checked_before_anything_starts(command: str, tmp_path: Path, capsys: pytest.CaptureFixture,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     import socket
+
+    from city.scenario import SHARE_ENV
+
+    monkeypatch.setenv(SHARE_ENV, "1")  # recorded, so the --share the demo exports is undone after the test
+    monkeypatch.delenv(SHARE_ENV)
 
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
