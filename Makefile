@@ -1,19 +1,27 @@
 # Two commands on a fresh machine: `make demo` and `make test`. Each creates .venv itself.
+# The demo installs surge without torch (the predictor and RL extras); the tests install everything.
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+DEMO_STAMP := $(VENV)/.installed-demo
 
 .PHONY: demo test bench clean
+
+$(DEMO_STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e .
+	touch $(DEMO_STAMP)
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e '.[test,rl,cluster,watch]'
-	touch $(STAMP)
+	$(PY) -m pip install -q -e '.[test,rl,cluster,predictor,watch]'
+	touch $(STAMP) $(DEMO_STAMP)
 
-demo: $(STAMP)
+demo: $(DEMO_STAMP)
 	$(VENV)/bin/surge demo
 
 test: $(STAMP)

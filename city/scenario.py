@@ -47,9 +47,19 @@ class Scenario:
     schedules: dict | None = None
 
 
+def cache_root() -> Path:
+    """The surge cache root, not created: ``$SURGE_CACHE``, else the platform's user cache folder (``~/.cache/surge`` on Linux)."""
+    env = os.environ.get("SURGE_CACHE")
+    if env:
+        return Path(env).expanduser()
+    from platformdirs import user_cache_path
+
+    return user_cache_path("surge", appauthor=False)
+
+
 def cache_dir() -> Path:
-    """Where built artefacts live: ``$SURGE_CACHE`` or ``~/.cache/surge``."""
-    path = Path(os.environ.get("SURGE_CACHE", Path.home() / ".cache" / "surge"))
+    """Where built artefacts live (:func:`cache_root`), created if need be."""
+    path = cache_root()
     path.mkdir(parents=True, exist_ok=True)
     return path
 
@@ -78,6 +88,14 @@ def scenario_spec(name: str, data_dir: Path | str | None = None, *, validate: bo
     if name in SHIPPED and data_dir is None:
         raise ConfigError(f"scenario {name!r} needs --data DIR (a directory laid out like shared/data)")
     return read_scenario_file(path, data_dir, validate=validate)
+
+
+def scenario_timezone(name: str, data_dir: Path | str | None = None) -> str:
+    """The zone a scenario's local times are in, for every events file read for it (``synthetic``: New York's)."""
+    from city.io.events import DEFAULT_TZ
+
+    spec = scenario_spec(name, data_dir, validate=False)
+    return spec.timezone if spec is not None else DEFAULT_TZ
 
 
 def check_scenario(name: str, data_dir: Path | str | None) -> Path | None:
@@ -222,7 +240,7 @@ def share_from_env() -> float | None:
     return share
 
 
-def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 2022, seed: int = 0, share: float | None = None) -> Scenario:
+def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int | None = None, seed: int = 0, share: float | None = None) -> Scenario:
     """The city and its demand world.
 
     ``synthetic`` generates everything.  A scenario file's world replays its
@@ -239,9 +257,12 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
     ``$SURGE_SHARE``) overrides the file's share of its trips; on a
     synthesised world it scales base demand and event trips (default
     :data:`city.demand.profile.FLEET_SHARE`; with hourly totals,
-    :func:`city.demand.real_level.default_share`).
+    :func:`city.demand.real_level.default_share`).  ``year`` is the demand
+    world's (commands pass their dates' year); by default the file's
+    ``year`` key, else 2022.
     """
     spec = scenario_spec(name, data_dir)
+    year = year if year is not None else (spec.year if spec is not None else 2022)
     city = load_city(name, data_dir)
     from city.demand import synthetic_world
     from city.demand.profile import FLEET_SHARE
@@ -254,7 +275,7 @@ def load_scenario(name: str, data_dir: Path | str | None = None, *, year: int = 
     return Scenario(name=name, city=city, world=world, data_dir=spec.data_dir, spec=spec, schedules=world.schedules)
 
 
-def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int = 0, share: float | None = None) -> object:
+def build_world(spec: ScenarioSpec, city: City, *, year: int, seed: int = 0, share: float | None = None) -> object:
     """The demand world of a scenario file on its city.
 
     The first ``fhvhv`` or ``zone-od`` entry with files is used, with the
@@ -264,9 +285,11 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
     and ``[occupancy]`` schedules go into the world.
     """
     from city.demand import RecordedWorld, synthetic_world
+    from city.demand.naming import naming_for
     from city.demand.profile import FLEET_SHARE
 
     calendar = {"holidays": (spec.holidays["country"], spec.holidays["subdiv"]), "schedules": None}
+    naming = naming_for(spec.event_names, spec.name)
     if spec.occupancy is not None:
         from city.io.occupancy import read_occupancy_csv
 
@@ -293,11 +316,12 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
             zone_profile=load_zone_profile(trips.files[0], city) if trips is not None else None,
             hourly_totals=read_hourly_totals(hourly.files[0], columns=hourly.columns),
             zone_hourly=read_zone_hourly(zonal.files[0], columns=zonal.columns, timezone=spec.timezone) if zonal is not None else None,
+            naming=naming,
             **calendar)
     if trips is not None and trips.kind == "zone-od":
         profile = load_zone_profile(trips.files[0], city)
         return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, zone_profile=profile,
-                               share=share or trips.share or FLEET_SHARE, **calendar)
+                               share=share or trips.share or FLEET_SHARE, naming=naming, **calendar)
     if trips is not None:
         from city.io.trips import read_fhvhv
 
@@ -307,7 +331,7 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
             table = sample_trips(table, keep, seed)
         return RecordedWorld(city, table, year=year, seed=seed, events=read_scenario_events(spec, city), weather=weather, pois=pois,
                              **calendar)
-    return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, share=share or FLEET_SHARE, **calendar)
+    return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, share=share or FLEET_SHARE, naming=naming, **calendar)
 
 
 def sample_trips(table, share: float, seed: int):  # noqa: ANN001, ANN201

@@ -15,6 +15,7 @@ the two runs' decisions are compared.
 from __future__ import annotations
 
 import json
+import socket
 import sys
 import tempfile
 import time
@@ -101,10 +102,20 @@ class RouterRestart:
                 "restarted_at": self.restarted_at}
 
 
+def check_port_free(port: int) -> None:
+    """One-line :class:`ConfigError` when loopback ``port`` is taken, before any process starts."""
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError as exc:
+            raise ConfigError(f"--port {port}: cannot listen on 127.0.0.1:{port} ({exc.strerror})") from None
+
+
 def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None = None, startup_timeout_s: float = 60.0,
                     watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None,
-                    resume: bool = False, agent_threads: int | str = "share", restart: RouterRestart | None = None) -> dict:
-    """Run ``cfg`` as real processes over a loopback router; the coordinator's result.
+                    resume: bool = False, agent_threads: int | str = "share", restart: RouterRestart | None = None,
+                    port: int | None = None) -> dict:
+    """Run ``cfg`` as real processes over a loopback router (on ``port``, default a free one); the coordinator's result.
 
     ``secure`` runs the bus with mutual TLS and access control, with the
     credentials in ``certs`` or, by default, new ones made in the run's
@@ -119,6 +130,8 @@ def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None 
     """
     from agents.rollout import warm_up
 
+    if port is not None:
+        check_port_free(port)
     warm_up()  # compile once here, not in every agent at once
     with tempfile.TemporaryDirectory(prefix="surge-fleet-") as tmp:
         if secure and certs is None:
@@ -129,14 +142,14 @@ def run_local_fleet(cfg: FleetConfig, *, secure: bool = True, certs: str | None 
         if restart is not None and run_dir is None:
             run_dir = str(Path(tmp) / "run")
         return _launch(cfg, certs if secure else None, str(Path(tmp) / "result.json"), startup_timeout_s, watch, run_dir, resume,
-                       agent_threads, restart)
+                       agent_threads, restart, port)
 
 
 def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeout_s: float,
             watch: Callable[[list[int]], None] | None = None, run_dir: str | None = None, resume: bool = False,
-            agent_threads: int | str = "share", restart: RouterRestart | None = None) -> dict:
+            agent_threads: int | str = "share", restart: RouterRestart | None = None, port: int | None = None) -> dict:
     ctx = mp.get_context("spawn")
-    port = free_tcp_port()
+    port = port or free_tcp_port()
     endpoint = f"{'tcp' if certs is None else 'tls'}/127.0.0.1:{port}"
     client = SessionArgs(mode="client", connect=[endpoint], certs=certs)
     procs: list = []

@@ -10,13 +10,21 @@ and the world and drives the simulator from outside; the policies stay in
 :mod:`agents`.
 
 :class:`FleetAECEnv` is the paper's one-agent-at-a-time rollout order as
-PettingZoo's AEC model: in every minute ``agent_selection`` walks the free
-taxis in index order; each sees its predecessors' committed controls; when
-the last free taxi has acted, the joint control (busy taxis take their next
-hop) is applied and the minute's stage cost is every agent's reward, with a
-minus sign.  Minutes in which no taxi is free are played through at once.
+PettingZoo's AEC model: in every minute ``agent_selection`` walks every taxi
+in index order (a busy taxi's mask offers only slot 0, its forced next hop);
+each sees its predecessors' committed controls; when the last taxi has acted,
+the joint control is applied and the minute's stage cost is every agent's
+reward, with a minus sign.  Because every minute is one full cycle of all
+agents, PettingZoo's ``aec_to_parallel`` wrapper accepts it
+(``is_parallelizable``), though the AEC env's observations differ from the
+parallel env's: they count the predecessors' controls.
 
 :class:`FleetParallelEnv` lets every taxi choose at once, one step a minute.
+
+Both have ``state()`` and a Box ``state_space`` for centralised critics (the
+layout is in :mod:`coordinator.rl_env_view`), and ``render()`` draws the map:
+``render_mode="rgb_array"`` returns an image, ``"human"`` opens a window
+where a display exists.
 
 Actions are slots of a taxi's control set: 0 stays (a busy taxi: its forced
 next hop), 1 picks up the oldest request waiting at the taxi's
@@ -33,6 +41,9 @@ all non-negative::
              control ends at that slot's node (slot 1: picking up here) / fleet size
     [18+K:]  the forecast rate η (requests a minute) of the taxi's sector and
              the sum over its local sectors (itself and adjacent ones)
+
+K is ``2 + `` the city's largest out-degree (the action count).  The
+parallel env's observations leave the predecessor counts at 0.
 
 Example::
 
@@ -64,11 +75,13 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 from agents.forecast_providers import make_provider
 from city.episode import episode_requests, initial_positions
 from city.sim import PICKUP, FleetSim
+from coordinator import rl_env_view as env_view
 
 STAY, PICK = 0, 1
 NEAR_REQUESTS = 4
 OWN_FEATURES = 6
 FORECAST_FEATURES = 2
+FIRST_DRAWN_SEED = 1000
 
 
 @dataclass(frozen=True)
@@ -86,11 +99,11 @@ class EnvConfig:
 
 
 @functools.lru_cache(maxsize=4)
-def _load_scenario(name: str, data_dir: str | None, world_seed: int):  # noqa: ANN202
+def _load_scenario(name: str, data_dir: str | None, world_seed: int, year: int):  # noqa: ANN202
     """Scenarios built once per process: environments are made and remade many times (vectorised envs, tests)."""
     from city.scenario import load_scenario
 
-    return load_scenario(name, data_dir, seed=world_seed)
+    return load_scenario(name, data_dir, year=year, seed=world_seed)
 
 
 class _Episode:
@@ -98,9 +111,9 @@ class _Episode:
 
     def __init__(self, config: EnvConfig) -> None:
         self.config = config
-        scen = _load_scenario(config.scenario, config.data_dir, config.world_seed)
-        self.city, self.world = scen.city, scen.world
         self.date = dt.date.fromisoformat(config.date)
+        scen = _load_scenario(config.scenario, config.data_dir, config.world_seed, self.date.year)
+        self.city, self.world = scen.city, scen.world
         self.requests = episode_requests(self.world, self.date, config.hour, config.minutes)
         self.provider = make_provider(config.forecast)
         degree = np.diff(self.city.indptr)
@@ -111,9 +124,21 @@ class _Episode:
         self.unit_xy = (self.city.xy - lo) / np.where(hi > lo, hi - lo, 1.0)
         self._eta_hour: int | None = None
         self.sim: FleetSim | None = None
+        self._seeds = np.random.default_rng(0)
 
-    def start(self, seed: int) -> None:
-        self.sim = FleetSim(self.city, self.requests, initial_positions(self.city, self.config.taxis, seed))
+    def start(self, seed: int | None) -> None:
+        """Place the fleet as evaluate's ``seed`` does; without a seed, draw the next one of a stream.
+
+        The stream is seeded by the last explicit seed (0 before any) and draws
+        seeds from :data:`FIRST_DRAWN_SEED` up, apart from the test protocol's
+        seeds 0-24, so that vectorised training, which resets without seeds,
+        meets a new placement each episode.
+        """
+        if seed is None:
+            seed = int(self._seeds.integers(FIRST_DRAWN_SEED, 2**31 - 1))
+        else:
+            self._seeds = np.random.default_rng(seed)
+        self.sim = FleetSim(self.city, self.requests, initial_positions(self.city, self.config.taxis, int(seed)))
         self.obs = self.sim.observe()
         self.total_cost = 0
 
@@ -207,6 +232,23 @@ class _Episode:
         self.obs = self.sim.observe()
         return cost
 
+    def state_space(self) -> gymnasium.spaces.Box:
+        low, high = env_view.state_bounds(self.config.taxis, self.city.n_sectors)
+        return gymnasium.spaces.Box(low, high, dtype=np.float32)
+
+    def state(self) -> np.ndarray:
+        return env_view.global_state(self.city, self.unit_xy, self.obs, self.eta(), self.max_hops, self.config.minutes)
+
+    def render(self, mode: str | None, window: dict) -> np.ndarray | None:
+        """The map for ``render()``: an image in ``rgb_array`` mode, a window in ``human`` mode, nothing without a mode."""
+        if mode is None or self.sim is None:
+            return None
+        title = f"{self.config.scenario} {self.config.date} {self.config.hour}:00 +{self.minute} min, cost so far {self.total_cost}"
+        if mode == "human":
+            env_view.show(self.city, self.obs, title, window)
+            return None
+        return env_view.draw(self.city, self.obs, title)
+
     def spaces(self) -> tuple[gymnasium.spaces.Space, gymnasium.spaces.Space]:
         obs = gymnasium.spaces.Dict({
             "observation": gymnasium.spaces.Box(0.0, np.inf, (self.obs_size,), np.float32),
@@ -220,20 +262,22 @@ def _agents(n: int) -> list[str]:
 
 
 class FleetAECEnv(AECEnv):
-    """The fleet as an AEC game: free taxis act one at a time, in index order, every minute; see the module docstring."""
+    """The fleet as an AEC game: every taxi acts in index order every minute, free ones choosing; see the module docstring."""
 
-    metadata = {"name": "surge_fleet_aec_v0", "render_modes": [], "is_parallelizable": True}
+    metadata = {"name": "surge_fleet_aec_v0", "render_modes": env_view.render_modes(), "is_parallelizable": True, "render_fps": 4}
 
-    def __init__(self, config: EnvConfig | None = None, **kwargs: Any) -> None:
+    def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None, **kwargs: Any) -> None:
         super().__init__()
         self.config = config or EnvConfig(**kwargs)
+        self.render_mode = env_view.check_render_mode(render_mode)
         self.episode = _Episode(self.config)
         self.possible_agents = _agents(self.config.taxis)
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
         obs_space, act_space = self.episode.spaces()
         self.observation_spaces = {a: obs_space for a in self.possible_agents}
         self.action_spaces = {a: act_space for a in self.possible_agents}
-        self.render_mode = None
+        self.state_space = self.episode.state_space()
+        self._window: dict = {}
 
     def observation_space(self, agent: str) -> gymnasium.spaces.Space:
         return self.observation_spaces[agent]
@@ -255,28 +299,25 @@ class FleetAECEnv(AECEnv):
         """The action that plays ``control`` (a node id or ``city.sim.PICKUP``) for ``agent`` now."""
         return self.episode.action_of(self._index[agent], control)
 
+    def state(self) -> np.ndarray:
+        """The global state of :mod:`coordinator.rl_env_view` (every taxi, waiting requests and forecast per sector)."""
+        return self.episode.state()
+
+    def render(self) -> np.ndarray | None:
+        return self.episode.render(self.render_mode, self._window)
+
     def reset(self, seed: int | None = None, options: dict | None = None) -> None:
-        self.episode.start(0 if seed is None else int(seed))
+        self.episode.start(seed)
         self.agents = list(self.possible_agents)
         self.rewards = {a: 0.0 for a in self.agents}
         self._cumulative_rewards = {a: 0.0 for a in self.agents}
         self.terminations = {a: False for a in self.agents}
         self.truncations = {a: False for a in self.agents}
         self.infos = {a: {} for a in self.agents}
-        self._begin_minute()
-
-    def _begin_minute(self) -> None:
-        """Play through minutes with no free taxi; then queue this minute's free taxis in index order."""
-        ep = self.episode
-        while not ep.done() and not (ep.obs.tau == 0).any():
-            self._add_cost(ep.step(ep.obs.pos.copy()))
-        if ep.done():
-            self.truncations = {a: True for a in self.agents}
-            self.agent_selection = self.agents[0]
-            return
-        self._queue = [self.possible_agents[i] for i in np.flatnonzero(ep.obs.tau == 0)]
         self._committed: dict[int, int] = {}
-        self.agent_selection = self._queue[0]
+        self.agent_selection = self.agents[0]
+        if self.render_mode == "human":
+            self.render()
 
     def _add_cost(self, cost: int) -> None:
         for a in self.agents:
@@ -296,36 +337,40 @@ class FleetAECEnv(AECEnv):
         self._cumulative_rewards[agent] = 0.0
         i = self._index[agent]
         self._committed[i] = self.episode.control(i, action)
-        self._queue.pop(0)
-        if self._queue:
-            self.agent_selection = self._queue[0]
+        if i + 1 < len(self.possible_agents):
+            self.agent_selection = self.possible_agents[i + 1]
         else:
             ep = self.episode
-            controls = ep.obs.pos.copy()
-            for j, u in self._committed.items():
-                controls[j] = u
+            controls = np.array([self._committed[j] for j in range(len(self.possible_agents))], dtype=np.int32)
             self._add_cost(ep.step(controls))
-            self._begin_minute()
+            self._committed = {}
+            self.agent_selection = self.possible_agents[0]
+            if ep.done():
+                self.truncations = {a: True for a in self.agents}
+            if self.render_mode == "human":
+                self.render()
         self._accumulate_rewards()
 
     def close(self) -> None:
-        pass
+        env_view.close(self._window)
 
 
 class FleetParallelEnv(ParallelEnv):
     """The fleet with every taxi choosing at once, one step a minute; see the module docstring."""
 
-    metadata = {"name": "surge_fleet_parallel_v0", "render_modes": []}
+    metadata = {"name": "surge_fleet_parallel_v0", "render_modes": env_view.render_modes(), "render_fps": 4}
 
-    def __init__(self, config: EnvConfig | None = None, **kwargs: Any) -> None:
+    def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None, **kwargs: Any) -> None:
         self.config = config or EnvConfig(**kwargs)
+        self.render_mode = env_view.check_render_mode(render_mode)
         self.episode = _Episode(self.config)
         self.possible_agents = _agents(self.config.taxis)
         obs_space, act_space = self.episode.spaces()
         self.observation_spaces = {a: obs_space for a in self.possible_agents}
         self.action_spaces = {a: act_space for a in self.possible_agents}
-        self.render_mode = None
+        self.state_space = self.episode.state_space()
         self.agents: list[str] = []
+        self._window: dict = {}
 
     def observation_space(self, agent: str) -> gymnasium.spaces.Space:
         return self.observation_spaces[agent]
@@ -337,12 +382,30 @@ class FleetParallelEnv(ParallelEnv):
     def total_cost(self) -> int:
         return self.episode.total_cost
 
+    @property
+    def sim(self) -> FleetSim:
+        assert self.episode.sim is not None, "reset() first"
+        return self.episode.sim
+
+    def action_of(self, agent: str, control: int) -> int:
+        """The action that plays ``control`` (a node id or ``city.sim.PICKUP``) for ``agent`` now."""
+        return self.episode.action_of(self.possible_agents.index(agent), control)
+
+    def state(self) -> np.ndarray:
+        """The global state of :mod:`coordinator.rl_env_view` (every taxi, waiting requests and forecast per sector)."""
+        return self.episode.state()
+
+    def render(self) -> np.ndarray | None:
+        return self.episode.render(self.render_mode, self._window)
+
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
         return {a: self.episode.observe(i, {}) for i, a in enumerate(self.possible_agents)}
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
-        self.episode.start(0 if seed is None else int(seed))
+        self.episode.start(seed)
         self.agents = list(self.possible_agents)
+        if self.render_mode == "human":
+            self.render()
         return self._observations(), {a: {} for a in self.agents}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
@@ -358,8 +421,9 @@ class FleetParallelEnv(ParallelEnv):
         infos = {a: {} for a in agents}
         if truncated:
             self.agents = []
+        if self.render_mode == "human":
+            self.render()
         return obs, rewards, terminations, truncations, infos
 
     def close(self) -> None:
-        pass
-
+        env_view.close(self._window)

@@ -116,8 +116,8 @@ class FleetConfig:
         from city.episode import episode_requests, initial_positions
         from city.scenario import load_scenario
 
-        scen = load_scenario(self.scenario, self.data_dir, seed=self.world_seed)
         date = dt.date.fromisoformat(self.date)
+        scen = load_scenario(self.scenario, self.data_dir, year=date.year, seed=self.world_seed)
         context = EpisodeContext(city=scen.city, date=date, hour=self.hour, minutes=self.minutes, seed=self.seed, world=scen.world)
         return scen, episode_requests(scen.world, date, self.hour, self.minutes), initial_positions(scen.city, self.taxis, self.seed), context
 

@@ -65,13 +65,12 @@ _KEY_BYTES = 20
 
 
 def cache_root(cache_dir: str | os.PathLike | None = None) -> Path:
-    """The surge cache root: ``cache_dir``, else ``$SURGE_CACHE``, else ``~/.cache/surge``."""
+    """The surge cache root: ``cache_dir``, else :func:`city.scenario.cache_root` (``$SURGE_CACHE`` or the user cache folder)."""
     if cache_dir:
         return Path(cache_dir).expanduser()
-    env = os.environ.get("SURGE_CACHE")
-    if env:
-        return Path(env).expanduser()
-    return Path.home() / ".cache" / "surge"
+    from city.scenario import cache_root as default_root
+
+    return default_root()
 
 
 def text_key(text: str) -> bytes:

@@ -21,6 +21,7 @@ It returns the shared world model's torch-free :class:`city.forecast.Forecast`.
 from __future__ import annotations
 
 import datetime as dt
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +50,10 @@ class ModelForecaster:
             from predictor.inputs import recorded_events
 
             directory = self.model.directory if self.model.directory is not None else Path(".")
-            self._events[key] = recorded_events(self.model.meta, directory, world.city)
+            self._events[key] = ev = recorded_events(self.model.meta, directory, world.city)
+            if ev is not None and _keys(ev) != _keys(world.events):
+                warnings.warn(f"the model in {directory} forecasts from the {len(ev)} events it was trained with (--events), "
+                              f"not this world's {len(world.events)}: the simulated demand does not follow the model's events", stacklevel=2)
         ev = self._events[key]
         return list(world.events) if ev is None else ev
 
@@ -101,6 +105,10 @@ class ModelForecaster:
             delta=p.copy(),
             beta=self.beta_for(world),
         )
+
+
+def _keys(events: list) -> list[tuple]:
+    return [(e.title, e.start, int(e.sector)) for e in events]
 
 
 class _Listing:

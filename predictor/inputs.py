@@ -64,9 +64,13 @@ def has_synthetic_events(world) -> bool:
     return isinstance(world, SyntheticWorld)
 
 
-def read_event_file(path: Path, city, reviews: Path | None = None) -> list:
-    """Events from a user file: the NYC permitted-events CSV, or surge's CSV/JSON listing."""
-    from city.io.events import read_events, read_permitted_events
+def read_event_file(path: Path, city, reviews: Path | None = None, tz: str | None = None) -> list:
+    """Events from a user file: the NYC permitted-events CSV, or surge's CSV/JSON listing.
+
+    ``tz`` is the scenario's timezone (:func:`city.scenario.scenario_timezone`): times with an
+    offset (``2022-11-18T01:00:00Z``) become local times there, as the scenario's own events do.
+    """
+    from city.io.events import DEFAULT_TZ, read_events, read_permitted_events
 
     if not path.is_file():
         raise ConfigError(f"--events: {path} does not exist")
@@ -74,7 +78,7 @@ def read_event_file(path: Path, city, reviews: Path | None = None) -> list:
         head = fh.readline()
     if "Event ID" in head and "Event Borough" in head:
         return read_permitted_events(path, city)
-    return read_events(path, city, reviews)
+    return read_events(path, city, reviews, tz=tz or DEFAULT_TZ)
 
 
 def load_world(scenario: str, data_dir: str | None, *, seed: int = 0, year: int = 2022, events: str | Path | None = None, reviews: str | Path | None = None, trips=None):
@@ -86,14 +90,14 @@ def load_world(scenario: str, data_dir: str | None, *, seed: int = 0, year: int 
         ``trips`` with the synthetic world's generated events: real counts
         would be explained by events that did not happen.
     """
-    from city.scenario import load_scenario
+    from city.scenario import load_scenario, scenario_timezone
 
     world = load_scenario(scenario, data_dir, year=year, seed=seed).world
     if trips and not events and has_synthetic_events(world):
         raise ConfigError("--trips needs the real events of those trips (--events FILE): the world's synthetic events did not happen")
     ev = tr = None
     if events:
-        ev = read_event_file(Path(events), world.city, Path(reviews) if reviews else None)
+        ev = read_event_file(Path(events), world.city, Path(reviews) if reviews else None, scenario_timezone(scenario, data_dir))
     if trips:
         from city.io.trips import read_fhvhv
 
@@ -170,9 +174,14 @@ def world_for_model(meta: dict, model_dir: str | Path, data_dir: str | None = No
     )
 
 
+def trained_timezone(meta: dict) -> str | None:
+    """The timezone a model's ``--events`` times were read in (models that record none: New York's, as they were read)."""
+    return (meta.get("scenario") or {}).get("timezone")
+
+
 def recorded_events(meta: dict, model_dir: str | Path, city) -> list | None:
     """The events of the ``--events`` file a model was trained with (None: it used the world's own)."""
     paths = recorded_paths({"inputs": {k: v for k, v in (meta.get("inputs") or {}).items() if k != "trips"}}, model_dir)
     if paths["events"] is None:
         return None
-    return read_event_file(paths["events"], city, paths["reviews"])
+    return read_event_file(paths["events"], city, paths["reviews"], trained_timezone(meta))

@@ -69,9 +69,24 @@ class EvalJob:
             raise ConfigError("--bootstrap must be >= 1")
 
 
+def input_lines(world, trips, job, timezone: str) -> list[str]:  # noqa: ANN001 - a demand world, a TripTable, a TrainJob
+    """What training read, one line each: the events and the trips (files, rows kept and dropped) or the world's own."""
+    if job.events:
+        events = f"events: {len(world.events)} from {job.events}" + (f" with reviews from {job.reviews}" if job.reviews else "")
+        events += f", local times in {timezone}"
+    else:
+        events = f"events: the scenario world's own ({len(world.events)})"
+    if trips is not None:
+        files = ", ".join(str(p) for p in job.trips)
+        line = f"trips: {len(trips):,} kept of {trips.n_read:,} rows read from {files} ({trips.n_dropped:,} dropped: outside the city or without a time)"
+    else:
+        line = "trips: none read; hourly counts are the scenario world's own"
+    return [events, line]
+
+
 def train(job: TrainJob) -> None:
     """Embed the events and train every network of a predictor into ``job.out`` (resumable)."""
-    from city.scenario import check_scenario
+    from city.scenario import check_scenario, scenario_timezone
     from predictor.features import LAG_HOURS, LEAD_HOURS
     from predictor.inputs import load_world, record_inputs
     from predictor.model import train_model
@@ -82,17 +97,21 @@ def train(job: TrainJob) -> None:
     job.check()
     check_scenario(job.scenario, job.data)
     t0 = time.perf_counter()
-    trips = list(job.trips) if job.trips else None
-    world, trips = load_world(job.scenario, job.data, seed=job.world_seed, year=job.year, events=job.events, reviews=job.reviews, trips=trips)
+    trip_files = list(job.trips) if job.trips else None
+    world, trips = load_world(job.scenario, job.data, seed=job.world_seed, year=job.year, events=job.events, reviews=job.reviews, trips=trip_files)
+    timezone = scenario_timezone(job.scenario, job.data)
     log_line(f"world: scenario {job.scenario}, {world.city.n_sectors} sectors, {len(world.events)} events, built in {time.perf_counter() - t0:.1f}s")
+    for line in input_lines(world, trips, job, timezone):
+        log_line(line)
     scenario = {
         "name": job.scenario,
         "data_dir": str(Path(job.data).resolve()) if job.data else None,
         "world_seed": job.world_seed,
         "year": job.year,
+        "timezone": timezone,
     }
     Path(job.out).mkdir(parents=True, exist_ok=True)
-    inputs = record_inputs(job.out, events=job.events, reviews=job.reviews, trips=trips)
+    inputs = record_inputs(job.out, events=job.events, reviews=job.reviews, trips=trip_files)
     cfg = TrainConfig(epochs=job.epochs, seed=job.seed, patience=job.patience, device=job.device)
     lead, lag = job.window or (LEAD_HOURS, LAG_HOURS)
     train_model(

@@ -116,7 +116,7 @@ def _world_for_model(config: ServeConfig, world):
     """
     import json
 
-    from predictor.inputs import RealInputsWorld, read_event_file, recorded_paths
+    from predictor.inputs import RealInputsWorld, read_event_file, recorded_paths, trained_timezone
 
     meta = json.loads((Path(config.model) / "model.json").read_text())
     trained = (meta.get("scenario") or {}).get("name")
@@ -125,7 +125,7 @@ def _world_for_model(config: ServeConfig, world):
     paths = recorded_paths({"inputs": {k: v for k, v in (meta.get("inputs") or {}).items() if k != "trips"}}, config.model)
     if paths["events"] is None:
         return world
-    return RealInputsWorld(world, read_event_file(paths["events"], world.city, paths["reviews"]))
+    return RealInputsWorld(world, read_event_file(paths["events"], world.city, paths["reviews"], trained_timezone(meta)))
 
 
 def serve_main(config: ServeConfig, bus: SessionArgs) -> None:

@@ -32,6 +32,7 @@ from city.demand.geography import (
 )
 from city.demand.profile import FLEET_SHARE, TILT, base_rate, profile_base_rate
 from city.demand.real_level import BASE_FLOOR, day_kinds, default_share, real_base, sector_split
+from city.demand.naming import NEW_YORK, Naming
 from city.demand.venues import make_venues, schedule
 from city.demand.world import DemandWorld, HourTrips, check_seed_year
 from city.errors import ConfigError
@@ -88,6 +89,10 @@ class SyntheticWorld(DemandWorld):
     schedules : dict, optional
         Occupancy schedules (:func:`city.io.occupancy.read_occupancy_csv`) for the assignment of
         requests to intersections; the built-in DOE ones otherwise.
+    naming : Naming
+        The venues', teams' and flagship shows' names (:mod:`city.demand.naming`); New York's by
+        default, a city's own with :func:`city.demand.naming.neutral`.  Only words change: the
+        events' times, places and attendance are the same.
     """
 
     def __init__(
@@ -104,6 +109,7 @@ class SyntheticWorld(DemandWorld):
         schedules: dict | None = None,
         hourly_totals: "HourlyTotals | None" = None,
         zone_hourly: "ZoneHourly | None" = None,
+        naming: Naming = NEW_YORK,
     ) -> None:
         check_seed_year(seed, year)
         if not demand_scale > 0:
@@ -123,8 +129,8 @@ class SyntheticWorld(DemandWorld):
         self.intensity, tilt = intensity_and_tilt(city, busy, counts, self.anchors)
         self.demand_scale = float(demand_scale)
         self.share = float(share)
-        venues = make_venues(city, self.anchors, busy, np.random.default_rng([seed, 13]))
-        specs = schedule(venues, year, np.random.default_rng([seed, 14]))
+        venues = make_venues(city, self.anchors, busy, np.random.default_rng([seed, 13]), naming)
+        specs = schedule(venues, year, np.random.default_rng([seed, 14]), naming)
         events, specs = write_events(specs, venues, random.Random(f"surge-texts-{seed}"))
         events, attendance = draw_attendance(specs, events, venues, weather, seed)
         super().__init__(city, year, seed, venues, events, weather, counts, pois, notes, holidays=holidays, schedules=schedules)

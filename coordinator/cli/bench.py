@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from coordinator.cli.options import hour, iso_date, positive, rollout_options, scenario_args
+from coordinator.cli.options import forecast_name, hour, iso_date, model_dir, positive, rollout_options, scenario_args
 from coordinator.experiments.bench import SHORTCUT_NAMES, CityBench, PlanBench, SimBench, bench_city, bench_plan, bench_sim
 
 
@@ -60,8 +60,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     pl.add_argument("--warmup", type=int, default=25, help="minutes of greedy play before timing (a mid-episode state)")
     pl.add_argument("--seed", type=int, default=0, help="seed of the fleet's initial placement")
     pl.add_argument("--policies", nargs="+", default=["surge", "garces2023"])
-    pl.add_argument("--forecast", default=None, help="forecast provider for surge (garces2023 keeps previous-hour)")
-    pl.add_argument("--model", default=None, help="trained predictor directory for surge's --forecast model")
+    pl.add_argument("--forecast", type=forecast_name, default=None, help="forecast provider for surge (garces2023 keeps previous-hour)")
+    pl.add_argument("--model", type=model_dir, default=None, help="trained predictor directory for surge's --forecast model")
     pl.add_argument("--threads", type=int, default=None, help="compiled-kernel threads (default: all cores)")
     pl.add_argument("--workers", type=int, default=1, help="threads planning independent agents at once (agents.waves)")
     pl.add_argument("--variants", nargs="+", default=["all"], metavar="VARIANT",

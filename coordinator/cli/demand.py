@@ -26,7 +26,7 @@ def cmd_demand(args: argparse.Namespace) -> int:
     from city.scenario import check_scenario, load_scenario
 
     check_scenario(args.scenario, args.data)
-    scen = load_scenario(args.scenario, args.data)
+    scen = load_scenario(args.scenario, args.data, year=dt.date.fromisoformat(args.date).year)
     rows = surge_report(scen.world, dt.date.fromisoformat(args.date), args.hour)
     total = sum(r["expected"] for r in rows)
     usual = sum(r["usual"] for r in rows)

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from coordinator.cli.options import hour, positive, share
+from coordinator.cli.options import hour, positive, share, tcp_port
 
 #: The demo's fleet: as many agent processes as a laptop holds (about 215 MB each).
 DEMO_TAXIS = 40
@@ -28,6 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--share", type=share, default=demo_share,
                    help=f"the fleet's share of real demand (default {demo_share:.5f}: the 100-taxi evaluation's demand per taxi)")
     p.add_argument("--insecure", action="store_true", help="run the bus without TLS or access control")
+    p.add_argument("--port", type=tcp_port, default=None, help="the loopback router's TCP port (default: a free one)")
     p.set_defaults(func=cmd_demo)
 
 
@@ -41,7 +42,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     path = args.json or str(out / "demo.json")
     # Through the fleet command's own parser, so that every flag it grows has its default here too.
     fleet_argv = ["fleet", "--run", "demo", "--hour", str(args.hour), "--minutes", str(args.minutes), "--taxis", str(args.taxis),
-                  "--policy", "surge", "--forecast", "previous-hour", "--json", path, "--check", *(["--insecure"] if args.insecure else [])]
+                  "--policy", "surge", "--forecast", "previous-hour", "--json", path, "--check", *(["--insecure"] if args.insecure else []),
+                  *(["--port", str(args.port)] if args.port else [])]
     ns = build_parser().parse_args(fleet_argv)
     rc = cmd_fleet(ns)
     print()

@@ -6,8 +6,10 @@ import argparse
 
 from city.errors import SurgeError
 from coordinator.cli.options import (
+    forecast_name,
     hour,
     iso_date,
+    model_dir,
     positive,
     rollout_options,
     scenario_args,
@@ -26,9 +28,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"],
                    help="registry names, each optionally with options: surge:forecast=true-rate,samples=500 "
                         "(oracle and oracle-auction always run)")
-    p.add_argument("--forecast", default=None,
+    p.add_argument("--forecast", type=forecast_name, default=None,
                    help="forecast provider for surge (true-rate, previous-hour, model); garces2023 keeps previous-hour")
-    p.add_argument("--model", default=None, help="trained predictor directory for surge's --forecast model")
+    p.add_argument("--model", type=model_dir, default=None, help="trained predictor directory for surge's --forecast model")
     p.add_argument("--horizon", type=positive, default=None, help="rollout horizon H")
     p.add_argument("--samples", type=positive, default=None, help="rollout Monte-Carlo samples")
     p.add_argument("--world-seed", type=int, default=0, help="seed of the synthetic demand world")

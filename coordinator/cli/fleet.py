@@ -14,11 +14,14 @@ from bus.keys import Keys
 from bus.router import router_main
 from city.errors import ConfigError
 from coordinator.cli.options import (
+    forecast_name,
     hour,
     iso_date,
+    model_dir,
     positive,
     rollout_options,
     scenario_args,
+    tcp_port,
 )
 from coordinator.fleet import (
     agent_context,
@@ -40,8 +43,8 @@ def fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  # 
     p.add_argument("--seed", type=int, default=0, help="initial placement seed (as surge evaluate's seeds)")
     p.add_argument("--world-seed", type=int, default=0)
     p.add_argument("--policy", default="surge", help="rollout policy: surge or garces2023, with options as in evaluate")
-    p.add_argument("--forecast", default=None, help="forecast provider for surge (true-rate, previous-hour, model)")
-    p.add_argument("--model", default=None, help="trained predictor directory for --forecast model")
+    p.add_argument("--forecast", type=forecast_name, default=None, help="forecast provider for surge (true-rate, previous-hour, model)")
+    p.add_argument("--model", type=model_dir, default=None, help="trained predictor directory for --forecast model")
     p.add_argument("--horizon", type=positive, default=None)
     p.add_argument("--samples", type=positive, default=samples)
     p.add_argument("--deadline", type=float, default=30.0, help="seconds an agent has for its turn before the base control is used")
@@ -143,7 +146,7 @@ def cmd_fleet(args) -> int:  # noqa: ANN001
                "secured: mutual TLS and access control, with credentials made for this run")
     print(f"starting {roles} and {cfg.taxis} agent processes on loopback, {how}", file=sys.stderr, flush=True)
     result = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs, run_dir=run_dir, resume=args.resume is not None,
-                             agent_threads=args.threads)
+                             agent_threads=args.threads, port=args.port)
     if args.check:
         print("running the same instance in-process to compare decisions", file=sys.stderr, flush=True)
         ref = in_process(cfg)
@@ -294,6 +297,7 @@ def add_parser(sub) -> None:  # noqa: ANN001
     fleet_args(p, taxis=8, minutes=20, samples=None)
     _grace_arg(p)
     p.add_argument("--check", action="store_true", help="also run the instance in-process and compare the decisions")
+    p.add_argument("--port", type=tcp_port, default=None, help="the loopback router's TCP port (default: a free one)")
     threads_arg(p)
     _checkpoint_args(p, "fleet")
     add_security_args(p)

@@ -20,6 +20,50 @@ from bus.session import (
 )
 from city.errors import ConfigError
 
+class DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows each option's default, except where there is none to show (None, off) or the help already says it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if action.default in (None, False, [], argparse.SUPPRESS) or "default" in text.lower():
+            return action.help
+        return super()._get_help_string(action)
+
+
+class SurgeParser(argparse.ArgumentParser):
+    """Every ``surge`` parser and subparser: defaults shown in ``--help``."""
+
+    def __init__(self, *args, formatter_class: type = DefaultsFormatter, **kwargs) -> None:  # noqa: ANN002, ANN003 - argparse's own
+        super().__init__(*args, formatter_class=formatter_class, **kwargs)
+
+
+def forecast_name(text: str) -> str:
+    """An argparse type: a forecast provider's name, checked whichever policies run."""
+    from agents.forecast_providers import PROVIDERS
+
+    if text not in PROVIDERS:
+        raise argparse.ArgumentTypeError(f"unknown forecast {text!r}; choose from {', '.join(sorted(PROVIDERS))}")
+    return text
+
+
+def tcp_port(text: str) -> int:
+    """An argparse type: a TCP port, 1..65535."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid port {text!r}") from None
+    if not 1 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"port {v} is outside 1..65535")
+    return v
+
+
+def model_dir(text: str) -> str:
+    """An argparse type: a trained predictor's directory (it holds model.json), checked whichever policies run."""
+    if not (Path(text) / "model.json").is_file():
+        raise argparse.ArgumentTypeError(f"{text}: not a trained predictor directory (no model.json; make one with surge predictor train)")
+    return text
+
+
 SCENARIO_HELP = "synthetic (embedded), nyc or manhattan (shipped scenario files, need --data), or a scenario .toml file"
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from coordinator.cli.options import forecast_name, model_dir
 
 
 def add_parser(subparsers) -> None:
@@ -34,8 +35,8 @@ def add_parser(subparsers) -> None:
     t.add_argument("--trips", nargs="+", default=None, help="HV-FHV trip parquet files: real hourly counts and β instead of the world's")
     t.set_defaults(func=train_main)
 
-    e = sub.add_parser("eval", help="the ablation on the test months: percent error per hour 15-21 h of every network and baseline, with 95% CIs")
-    e.add_argument("--model", required=True, help="trained model directory")
+    e = sub.add_parser("eval", help="the ablation on the test months: percent error per hour 15-21 h of every network and baseline, with 95%% CIs")
+    e.add_argument("--model", type=model_dir, required=True, help="trained model directory")
     e.add_argument("--json", default=None, help="write results as JSON here")
     e.add_argument("--plot", default=None, help="write a PNG line chart here")
     e.add_argument("--data", default=None, help="override the data directory recorded in the model")
@@ -53,8 +54,8 @@ def add_parser(subparsers) -> None:
     v.add_argument("--scenario", default="synthetic", help="synthetic, nyc, manhattan or a scenario .toml file")
     v.add_argument("--data", default=None, help="data directory laid out like shared/data (for nyc, manhattan)")
     v.add_argument("--world-seed", type=int, default=0, help="seed of the demand world (as the coordinator's)")
-    v.add_argument("--forecast", default="model", help="provider to serve: model (default), true-rate or previous-hour")
-    v.add_argument("--model", default=None, help="trained model directory for --forecast model")
+    v.add_argument("--forecast", type=forecast_name, default="model", help="provider to serve: model (default), true-rate or previous-hour")
+    v.add_argument("--model", type=model_dir, default=None, help="trained model directory for --forecast model")
     v.set_defaults(func=serve_cmd)
 
 

@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from city.errors import SurgeError
+from city.errors import DataError, SurgeError
 from coordinator.cli.evaluate import print_results
 
 
@@ -44,11 +44,21 @@ def cmd_report(args: argparse.Namespace) -> int:
         return cmd_results_page(args)
     if not args.results:
         raise SurgeError("surge report: give a results file (or --results-page)")
-    from coordinator.experiments.analysis import complete_seeds
     from coordinator.experiments.results import read_results
 
     path = Path(args.results)
     doc = read_results(path)
+    try:
+        return _report(doc, path, args)
+    except SurgeError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise DataError(f"a field of this results document cannot be reported ({type(exc).__name__}: {exc})", path=path) from exc
+
+
+def _report(doc: dict, path: Path, args: argparse.Namespace) -> int:
+    from coordinator.experiments.analysis import complete_seeds
+
     full = doc if args.all_seeds else complete_seeds(doc)
     if not full["episodes"]:
         raise SurgeError(f"{path}: no seed is finished at every hour (use --all-seeds)")

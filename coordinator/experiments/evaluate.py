@@ -117,8 +117,8 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
     there at once, and an interrupted instance resumes from its finished episodes.
     """
     known = dict(known or {})
-    scen = _scenario_cache(cfg)
     date = dt.date.fromisoformat(date_text)
+    scen = _scenario_cache(cfg, date.year)
     requests = episode_requests(scen.world, date, hour, cfg.minutes)
     start = initial_positions(scen.city, cfg.taxis, seed)
     context = EpisodeContext(city=scen.city, date=date, hour=hour, minutes=cfg.minutes, seed=seed, world=scen.world)
@@ -206,12 +206,14 @@ def borrowable(cfg: EvalConfig, doc: dict) -> dict[tuple[str, int, int], dict[st
 _SCENARIOS: dict = {}
 
 
-def _scenario_cache(cfg: EvalConfig):
+def _scenario_cache(cfg: EvalConfig, year: int | None = None):
+    """The scenario with its demand world for ``year`` (default: the first date's), built once per process."""
     from city.scenario import load_scenario
 
-    key = (cfg.scenario, cfg.data_dir, cfg.world_seed)
+    year = year if year is not None else dt.date.fromisoformat(cfg.dates[0]).year
+    key = (cfg.scenario, cfg.data_dir, cfg.world_seed, year)
     if key not in _SCENARIOS:
-        _SCENARIOS[key] = load_scenario(cfg.scenario, cfg.data_dir, seed=cfg.world_seed)
+        _SCENARIOS[key] = load_scenario(cfg.scenario, cfg.data_dir, year=year, seed=cfg.world_seed)
     return _SCENARIOS[key]
 
 

@@ -74,6 +74,19 @@ def missing_field(ep: object, fields: tuple[str, ...] = EPISODE_FIELDS) -> str |
     return next((f for f in fields if not isinstance(ep, dict) or f not in ep), None)
 
 
+#: The type each episode field must have, and how an error names it (None is allowed for the oracle's cost).
+EPISODE_TYPES: dict[str, tuple[tuple[type, ...], str]] = {
+    "date": ((str,), "a YYYY-MM-DD string"), "hour": ((int,), "an integer"), "seed": ((int,), "an integer"), "policy": ((str,), "a string"),
+    "oracle_cost": ((int, float, type(None)), "a number"),
+    **{m: ((int, float), "a number") for m in METRICS},
+}
+
+
+def mistyped_field(ep: dict) -> str | None:
+    """The first field of episode row ``ep`` whose value has the wrong type (booleans are not numbers)."""
+    return next((f for f, (types, _) in EPISODE_TYPES.items() if f in ep and (isinstance(ep[f], bool) or not isinstance(ep[f], types))), None)
+
+
 def surge_defaults() -> dict:
     """The approximation options a ``surge`` label plans with when it does not set them; results files record them."""
     from agents.rollout_policy import EXACT, Surge
@@ -134,11 +147,19 @@ def read_results(path: str | Path) -> dict:
     for key in ("config", "city", "episodes"):
         if key not in doc:
             raise DataError(f"no {key!r} field", path=path)
+    if not isinstance(doc["episodes"], list) or not isinstance(doc["config"], dict):
+        raise DataError("'episodes' must be a list and 'config' an object", path=path)
     for k, ep in enumerate(doc["episodes"]):
         missing = missing_field(ep)
         if missing:
             raise DataError(f"episode {k} has no {missing!r} field", path=path)
-    return upgrade(doc)
+        wrong = mistyped_field(ep)
+        if wrong:
+            raise DataError(f"episode {k}: field {wrong!r} is {ep[wrong]!r}, not {EPISODE_TYPES[wrong][1]}", path=path)
+    try:
+        return upgrade(doc)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise DataError(f"not a readable results document ({type(exc).__name__}: {exc})", path=path) from exc
 
 
 def upgrade(doc: dict) -> dict:
