@@ -5,7 +5,7 @@
 
 writes ``rl-training.json`` (the learning curve, every evaluation instance's
 cost, paired differences against greedy and stay) and ``rl-training.png``
-(the learning curve).  See :mod:`coordinator.rl_train` and docs/rl.md.
+(the learning curve).  See :mod:`coordinator.experiments.rl_train` and docs/rl.md.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from coordinator.rl_train import TrainConfig, train, write
+from coordinator.experiments.rl_train import TrainConfig, train, write
 
 
 def main(argv: list[str] | None = None) -> None:

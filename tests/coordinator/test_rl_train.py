@@ -14,7 +14,7 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
 from coordinator.experiments.evaluate import EvalConfig, evaluate  # noqa: E402
-from coordinator.rl_train import TrainConfig, greedy_policy, play  # noqa: E402
+from coordinator.experiments.rl_train import TrainConfig, greedy_policy, play  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 

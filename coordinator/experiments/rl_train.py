@@ -38,7 +38,7 @@ try:
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecEnvWrapper, VecNormalize
 except ImportError as exc:  # pragma: no cover - exercised only without the extra
-    raise ImportError("coordinator.rl_train needs Stable-Baselines3, sb3-contrib and SuperSuit: pip install 'surge[rl]'") from exc
+    raise ImportError("coordinator.experiments.rl_train needs Stable-Baselines3, sb3-contrib and SuperSuit: pip install 'surge[rl]'") from exc
 
 from agents.greedy import greedy_controls
 from city.fingerprint import machine
