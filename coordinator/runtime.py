@@ -21,6 +21,16 @@ every way out, checkpoints each minute to its run directory
 (:mod:`coordinator.checkpoint`, ``--resume``), and tells a partition from
 single failures and a hung agent from a live one (:mod:`coordinator.faults`).
 
+One coordinator drives a run.  Each has a run epoch, its start in
+milliseconds since 1970 (UTC), raised above any epoch it has seen, and holds
+the liveliness token ``coordinator/<epoch>``.  A coordinator that finds
+another's token alive refuses to start; with ``takeover`` it declares its
+token first, which fences the old one: agents drop every state, turn and
+stop of a lower epoch than the highest they have seen, and the old
+coordinator, on seeing the higher token, stops at once without another
+checkpoint or stop.  The run directory is locked (:func:`checkpoint.locked`)
+for as long as a coordinator plays from it.
+
 A proposed control counts only if it is on its own agent's key, for the
 current minute, and one of that agent's candidate controls; anything else is
 dropped (the first of each kind logged) and the coordinator keeps waiting
@@ -33,6 +43,8 @@ from __future__ import annotations
 import datetime as dt
 import sys
 import time
+from collections.abc import Iterable
+from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -49,7 +61,7 @@ from bus.forecasts import ForecastPublisher, sector_message
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
 from bus.wire import ENCODING, Ack, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
-from city.errors import ConfigError
+from city.errors import ConfigError, SurgeError
 from city.fingerprint import city_sha256, code_version
 from city.forecast import Forecast
 from city.sim import FleetSim, Observation, Requests, decisions_hash
@@ -123,11 +135,36 @@ def log(message: str) -> None:
     print(f"surge coordinator: {message}", file=sys.stderr, flush=True)
 
 
+class TakenOver(SurgeError):
+    """A coordinator of a higher run epoch took the run over: this one stops, with no further checkpoint or stop."""
+
+
+#: Seconds a coordinator asks the router for the run's live coordinator tokens before it starts.
+LIVE_QUERY_S = 3.0
+#: Seconds a coordinator that takes a run over waits for the fenced one to release the run directory's lock.
+TAKEOVER_WAIT_S = 60.0
+
+
+def new_epoch(seen: Iterable[int]) -> int:
+    """A run epoch above every one in ``seen``: now in milliseconds since 1970 (UTC), raised if this host's clock is behind."""
+    return max([time.time_ns() // 1_000_000, *(e + 1 for e in seen)])
+
+
+def epoch_time(epoch: int) -> str:
+    """When the coordinator of run epoch ``epoch`` started (to the second, UTC)."""
+    return dt.datetime.fromtimestamp(epoch / 1000, dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
 class Coordinator:
     """Runs one episode over the bus; :meth:`run` returns its metrics and decisions."""
 
-    def __init__(self, config: FleetConfig, progress: bool = True, run_dir: str | Path | None = None, resume: bool = False) -> None:
+    def __init__(self, config: FleetConfig, progress: bool = True, run_dir: str | Path | None = None, resume: bool = False,
+                 takeover: bool = False) -> None:
         self.cfg = config
+        self.resume, self.takeover = resume, takeover
+        #: This coordinator's run epoch (set when it claims the run), and a higher one that took the run over.
+        self.epoch = 0
+        self.fenced_by: int | None = None
         self.keys = Keys(config.run)
         self.progress = progress
         scen, requests, start, context = config.instance()
@@ -154,11 +191,7 @@ class Coordinator:
         if resume:
             if self.run_dir is None:
                 raise ConfigError("resuming a run needs its run directory")
-            self.tally = checkpoint.restore(self.run_dir, self.sim, config.minutes)
-            if self.sim.state.t >= config.minutes:
-                raise ConfigError(f"{self.run_dir / checkpoint.CHECKPOINT}: run {config.run!r} finished "
-                                  f"(minute {config.minutes} of {config.minutes}); nothing to resume")
-            log(f"resuming run {config.run!r} at minute {self.sim.state.t} from {self.run_dir / checkpoint.CHECKPOINT}")
+            self._restore()  # a bad or finished checkpoint is one line before the bus; read again once the run directory is locked
         #: Whether every agent has joined once: later token changes are departures and returns.
         self.running = False
         self.bounds = Bounds(taxis=config.taxis, nodes=self.city.n_nodes, sectors=self.city.n_sectors, minutes=config.minutes)
@@ -169,18 +202,64 @@ class Coordinator:
         self.waiting: set[int] = set()
         self.arrived: dict[int, Control] = {}
 
+    def _restore(self) -> None:
+        assert self.run_dir is not None
+        self.tally = checkpoint.restore(self.run_dir, self.sim, self.cfg.minutes)
+        if self.sim.state.t >= self.cfg.minutes:
+            raise ConfigError(f"{self.run_dir / checkpoint.CHECKPOINT}: run {self.cfg.run!r} finished "
+                              f"(minute {self.cfg.minutes} of {self.cfg.minutes}); nothing to resume")
+
+    # ------------------------------------------------------------------ claim
+    def _live_epochs(self, session) -> list[int]:  # noqa: ANN001
+        """The run epochs of the run's coordinators whose tokens are alive now."""
+        epochs = []
+        for reply in session.liveliness().get(self.keys.all_coordinators, timeout=LIVE_QUERY_S):
+            if reply.ok is not None and (e := Keys.agent_of(str(reply.ok.key_expr))) is not None:
+                epochs.append(e)
+        return epochs
+
+    def _claim(self, session, stack: ExitStack) -> bool:  # noqa: ANN001
+        """Choose this coordinator's run epoch; refuse a run with a live coordinator, or fence it with ``takeover`` (``True``).
+
+        The fence is this coordinator's token, declared at once: the agents
+        drop the old coordinator's messages from then on, and the old
+        coordinator stops when it sees it (and so releases the run directory).
+        """
+        live = self._live_epochs(session)
+        done = [checkpoint.epoch_of(self.run_dir)] if self.resume and self.run_dir is not None else []
+        self.epoch = new_epoch([*live, *done])
+        if not live:
+            return False
+        old = max(live)
+        if not self.takeover:
+            verb = "resume" if self.resume else "start"
+            raise ConfigError(f"run {self.cfg.run!r} has a live coordinator (run epoch {old}, since {epoch_time(old)}): "
+                              f"refusing to {verb} a second one, which would drive the same agents; if that coordinator is "
+                              f"unreachable rather than dead, --takeover fences it and takes the run over")
+        token = session.liveliness().declare_token(self.keys.coordinator(self.epoch))
+        stack.callback(token.undeclare)
+        log(f"taking run {self.cfg.run!r} over from the coordinator of run epoch {old} (since {epoch_time(old)}): "
+            f"its turns are dropped from now on; this one is epoch {self.epoch}")
+        return True
+
     # ------------------------------------------------------------------ inbox
     def _handle(self, item: tuple[str, str, object], want: set[tuple[int, int]] | None = None) -> Control | None:
         """Serve queries, track liveliness, and return the control if this item is one of ``want``'s (t, agent).
 
         Anything wrong with the item, or raised while handling it, drops it.
+        A higher coordinator's token raises :class:`TakenOver`.
         """
         tag, key, payload = item
         try:
-            return self._handle_one(tag, key, payload, want)
+            out = self._handle_one(tag, key, payload, want)
         except Exception as exc:  # one bad message never ends the run
             self.rejected.exception(tag, key, exc)
-            return None
+            out = None
+        if self.fenced_by is not None:
+            raise TakenOver(f"run {self.cfg.run!r} was taken over by the coordinator of run epoch {self.fenced_by} "
+                            f"(since {epoch_time(self.fenced_by)}); this one (epoch {self.epoch}) stops at minute "
+                            f"{self.sim.state.t} without writing its checkpoint again")
+        return out
 
     def _handle_one(self, tag: str, key: str, payload: object, want: set[tuple[int, int]] | None) -> Control | None:
         current = None if self.obs is None else int(self.obs.t)
@@ -189,6 +268,10 @@ class Coordinator:
             if agent is None or not 0 <= agent < self.cfg.taxis:
                 raise WireError(f"{key}: a liveliness token of no agent of this run's {self.cfg.taxis}")
             self.health.token(agent, bool(payload), self.running)
+        elif tag == "coordinator":
+            epoch = Keys.agent_of(key)
+            if payload and epoch is not None and epoch > self.epoch:
+                self.fenced_by = epoch
         elif tag == "ack":
             self.tally.traffic.received(payload)  # type: ignore[arg-type]
             msg = check_ack(decode(payload, Ack, key), key, self.bounds)  # type: ignore[arg-type]
@@ -211,6 +294,8 @@ class Coordinator:
             c = check_control(decode(payload, Control, key), key, self.bounds)  # type: ignore[arg-type]
             if c.by != "agent":
                 raise WireError(f"{key}: a proposed control must say by='agent', not {c.by!r}")
+            if c.epoch != self.epoch:
+                raise WireError(f"{key}: a control for run epoch {c.epoch}, this coordinator's is {self.epoch}")
             if self.obs is not None and c.t == self.obs.t:
                 check_choice(c, key, candidate_controls(self.city, self.obs, c.agent))
                 self.health.ack(c.agent, c.t, current)
@@ -235,7 +320,7 @@ class Coordinator:
 
     def full_state(self) -> bytes:
         obs = self.sim.observe()
-        return state_message(obs, None, base_controls(self.city, self.rollout, obs)).encode()
+        return state_message(obs, None, base_controls(self.city, self.rollout, obs), self.epoch).encode()
 
     def _snapshot(self) -> Snapshot:
         """The full state (with its base controls) and the hour's forecast: all a (re)joining agent needs (a turn brings its commitments)."""
@@ -244,8 +329,14 @@ class Coordinator:
     # ------------------------------------------------------------------- run
     def run(self, bus: SessionArgs) -> dict:
         """Play the episode; ``Stop`` goes out on every way out (done, an error, SIGTERM, Ctrl-C), with the reason."""
-        with open_session(bus) as session:
+        with open_session(bus) as session, ExitStack() as stack:
             inbox = Inbox()
+            fenced = self._claim(session, stack)
+            if self.run_dir is not None:  # after a takeover, wait for the fenced coordinator to let go of it
+                stack.enter_context(checkpoint.locked(self.run_dir, self.cfg.run, self.epoch, TAKEOVER_WAIT_S if fenced else 0.0))
+            if self.resume:
+                self._restore()  # what the run directory holds now: a fenced coordinator may have played on
+                log(f"resuming run {self.cfg.run!r} at minute {self.sim.state.t} from {self.run_dir / checkpoint.CHECKPOINT}")
             pub_stop = publisher(session, self.keys.stop)
             decls = [
                 inbox.serve(session, self.keys.spec, "spec"),
@@ -254,13 +345,20 @@ class Coordinator:
                 inbox.subscribe(session, self.keys.all_controls, "control"),
                 inbox.subscribe(session, self.keys.all_acks, "ack"),
                 inbox.watch_liveliness(session, self.keys.all_alive, "alive"),
+                inbox.watch_liveliness(session, self.keys.all_coordinators, "coordinator"),
             ]
-            token = session.liveliness().declare_token(self.keys.coordinator)  # once the snapshot it stands for is served
-            reason = "the coordinator failed"
+            if not fenced:  # a takeover's token is out already: it is the fence
+                token = session.liveliness().declare_token(self.keys.coordinator(self.epoch))  # once the snapshot it stands for is served
+                stack.callback(token.undeclare)
+            log(f"run {self.cfg.run!r}: this coordinator is run epoch {self.epoch} (since {epoch_time(self.epoch)})")
+            reason: str | None = "the coordinator failed"
             try:
                 result = self._run(session, inbox)
                 reason = "done"
                 return result
+            except TakenOver:
+                reason = None  # the run goes on under the new coordinator: no stop
+                raise
             except SystemExit as exc:
                 reason = f"the coordinator was stopped (exit {exc.code})"
                 raise
@@ -271,12 +369,13 @@ class Coordinator:
                 reason = f"the coordinator failed: {exc}"[:300]
                 raise
             finally:
-                pub_stop.put(Stop(t=self.cfg.minutes if reason == "done" else int(self.sim.state.t), reason=reason).encode())
-                if reason != "done":
+                if reason is not None:
+                    pub_stop.put(Stop(t=self.cfg.minutes if reason == "done" else int(self.sim.state.t), epoch=self.epoch,
+                                      reason=reason).encode())
+                if reason not in ("done", None):
                     log(f"published stop at minute {self.sim.state.t}: {reason}")
                 for d in decls:
                     d.undeclare()
-                token.undeclare()
 
     def _wait_for_agents(self, inbox: Inbox) -> None:
         deadline = time.monotonic() + self.cfg.join_timeout_s
@@ -319,7 +418,7 @@ class Coordinator:
                 self.forecast_msg = self._forecast(session, inbox, t // 60)
                 self._hold_forecast(pub_forecast, t // 60)
             base = base_controls(self.city, self.rollout, obs)
-            pub_state.put(state_message(obs, previous, base).encode())
+            pub_state.put(state_message(obs, previous, base, self.epoch).encode())
             previous = np.asarray(obs.req_index)
             u = base.copy()
             waves = plan_waves(self.city, obs, self.rollout.prune)
@@ -328,7 +427,7 @@ class Coordinator:
             costs.append(self.sim.step(u))
             step_s.append(time.perf_counter() - t0)
             if self.run_dir is not None:
-                checkpoint.save(self.run_dir, asdict(cfg), self.sim, tally)
+                checkpoint.save(self.run_dir, asdict(cfg), self.sim, tally, self.epoch)
             if self.progress:
                 free = int((obs.tau == 0).sum())
                 log(f"minute {t + 1}/{cfg.minutes}: {free} free {'taxi' if free == 1 else 'taxis'} took turns, "
@@ -464,7 +563,7 @@ class Coordinator:
             if c is None:
                 tally.fallbacks[agent] += 1
                 tally.fallen.append([t, agent])
-                c = Control(t=t, agent=agent, control=int(base[agent]), by="base")
+                c = Control(t=t, agent=agent, control=int(base[agent]), epoch=self.epoch, by="base")
             else:
                 u[agent] = c.control
                 tally.planned[agent] += 1
@@ -498,7 +597,7 @@ class Coordinator:
                     if a not in health.alive:
                         commit(a, None)
                         continue
-                    turns[a] = Turn(t=t, agent=a, deps=depends[a], controls=u[depends[a]]).encode()
+                    turns[a] = Turn(t=t, agent=a, deps=depends[a], controls=u[depends[a]], epoch=self.epoch).encode()
                     pubs[a].put(turns[a])
                     if a in health.suspect:
                         commit(a, None)
@@ -574,11 +673,14 @@ class Coordinator:
 
 
 def coordinator_main(config: FleetConfig, bus: SessionArgs, result_path: str | None = None, run_dir: str | None = None,
-                     resume: bool = False) -> dict:
-    """Run the coordinator (checkpointing to ``run_dir``, resuming from it); with ``result_path``, write the result there as JSON."""
+                     resume: bool = False, takeover: bool = False) -> dict:
+    """Run the coordinator (checkpointing to ``run_dir``, resuming from it); with ``result_path``, write the result there as JSON.
+
+    ``takeover`` fences a live coordinator of the same run instead of refusing to start.
+    """
     import json
 
-    result = Coordinator(config, run_dir=run_dir, resume=resume).run(bus)
+    result = Coordinator(config, run_dir=run_dir, resume=resume, takeover=takeover).run(bus)
     if result_path is not None:
         Path(result_path).write_text(json.dumps(result, indent=1))
     return result

@@ -482,7 +482,7 @@ def test_a_turn_waits_for_its_live_dependencies_only_and_resends_unanswered_turn
     base = np.array([7, 8, 9], dtype=np.int32)
     ok = int(candidate_controls(coord.city, coord.obs, 1)[0])
     inbox = Inbox()
-    inbox.put("control", coord.keys.control(1), Control(t=0, agent=1, control=ok).encode())
+    inbox.put("control", coord.keys.control(1), Control(t=0, agent=1, control=ok, epoch=0).encode())
     u = base.copy()
     out = coord._turns(inbox, turns, commits, 0, waves, base, u)
     assert [(k, m.agent) for k, m in events if k == "turn"] == [("turn", 0), ("turn", 1), ("turn", 2), ("turn", 0)]  # 0 again after RESEND_S
@@ -505,7 +505,7 @@ def test_a_turn_goes_out_once_its_dependencies_commit_without_waiting_for_their_
     pick = {a: int(candidate_controls(coord.city, coord.obs, a)[-1]) for a in range(3)}
     inbox = Inbox()
     for a in range(3):
-        inbox.put("control", coord.keys.control(a), Control(t=0, agent=a, control=pick[a]).encode())
+        inbox.put("control", coord.keys.control(a), Control(t=0, agent=a, control=pick[a], epoch=0).encode())
     u = np.full(3, -5, dtype=np.int32)
     out = coord._turns(inbox, turns, commits, 0, waves, u.copy(), u)
     assert [(k, m.agent) for k, m in events] == [("turn", 0), ("turn", 2), ("commit", 0), ("turn", 1), ("commit", 1), ("commit", 2)]

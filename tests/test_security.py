@@ -120,7 +120,7 @@ def test_taxi_3s_certificate_can_do_only_what_taxi_3_does(secured: dict) -> None
     assert ("taxi-0", "surge/acl/state", "the coordinator's state") in seen
     # ... and nothing else: no control/4, ack/4, committed, state, forecast, turn or stop from taxi 3, no alive/4
     # and no coordinator token (taxi-0 watches for one), and no control/3 or ack/3 from any other identity
-    assert [s for s in seen if "forged" in s[2] or s[1].endswith(("alive/4", "/coordinator"))] == []
+    assert [s for s in seen if "forged" in s[2] or s[1].endswith(("alive/4", "/coordinator/9"))] == []
     assert len(seen) == 4 and out["coordinator token"] == "seen"
     assert out["answers"] == {"taxi-0 spec": ["coordinator"], "taxi-0 snapshot": ["coordinator"],
                               "coordinator predictor": ["predictor"], "taxi-4 spec": ["coordinator"],
@@ -251,7 +251,7 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
             sent.append(decode(payload, Control))
 
     def turn(t: int, deps: list[int], controls: list[int]) -> bytes:
-        return Turn(t=t, agent=1, deps=np.array(deps, np.int32), controls=np.array(controls, np.int32)).encode()
+        return Turn(t=t, agent=1, deps=np.array(deps, np.int32), controls=np.array(controls, np.int32), epoch=0).encode()
 
     inbox = Inbox()
     for item in [
@@ -263,13 +263,13 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
         ("turn", k.turn(1), turn(0, [2], [ok])),  # agent 2 is no predecessor of agent 1
         ("turn", k.turn(1), turn(7, [], [])),  # not a minute of the episode
         ("turn", k.turn(1), turn(2, [], [])),  # ahead of its state: held, then replaced by the turn of minute 0
-        ("stop", k.stop, Stop(t=1).encode()),  # not the run's end: the agent stays
+        ("stop", k.stop, Stop(t=1, epoch=0).encode()),  # not the run's end: the agent stays
         ("forecast", k.forecast(0), b"\x93\x01\x02"),
         *[("forecast", k.forecast(s), sector_message(fc, agent.city, 0, s).encode()) for s in range(S)],
         ("dropoffs", k.dropoffs, Dropoffs(hour=0, delta=fc.delta).encode()),
         ("turn", k.turn(1), turn(0, [0], [not_a_move])),  # checked when the agent plans: dropped, no control sent
         ("turn", k.turn(1), turn(0, [0], [ok])),
-        ("stop", k.stop, Stop(t=4).encode()),
+        ("stop", k.stop, Stop(t=4, epoch=0).encode()),
     ]:
         inbox.put(*item)
     agent._loop(None, inbox, Out())
@@ -297,11 +297,11 @@ def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> 
 
     ok = int(candidate_controls(coord.city, obs, 1)[0])
     want = {(0, 1)}
-    for payload in (Control(t=0, agent=1, control=2**40).encode(), Control(t=0, agent=1, control=-5).encode(),
-                    Control(t=0, agent=1, control=ok, by="base").encode(), Control(t=0, agent=1, control=ok, plan_s=float("nan")).encode(),
+    for payload in (Control(t=0, agent=1, control=2**40, epoch=0).encode(), Control(t=0, agent=1, control=-5, epoch=0).encode(),
+                    Control(t=0, agent=1, control=ok, epoch=0, by="base").encode(), Control(t=0, agent=1, control=ok, epoch=0, plan_s=float("nan")).encode(),
                     b"junk"):
         assert coord._handle(("control", k.control(1), payload), want) is None
-    assert coord._handle(("control", k.control(2), Control(t=0, agent=1, control=ok).encode()), want) is None
+    assert coord._handle(("control", k.control(2), Control(t=0, agent=1, control=ok, epoch=0).encode()), want) is None
     assert coord._handle(("alive", k.alive(7), True), want) is None and coord.health.alive == set()
 
     class Gone:
@@ -312,7 +312,7 @@ def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> 
             pass
 
     assert coord._handle(("snapshot", k.snapshot, Gone()), want) is None
-    got = coord._handle(("control", k.control(1), Control(t=0, agent=1, control=ok).encode()), want)
+    got = coord._handle(("control", k.control(1), Control(t=0, agent=1, control=ok, epoch=0).encode()), want)
     assert got is not None and got.control == ok
     kinds = coord.rejected.counts
     assert sum(kinds.values()) == 8 and any("RuntimeError" in kind for kind in kinds)
