@@ -57,6 +57,8 @@ def test_every_message_round_trips_exactly() -> None:
         (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": 1}), "turn has no field 'agent'"),
         (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": "1", "agent": 0}), "field 't' is str, expected int"),
         (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": True, "agent": 0}), "field 't' is bool, expected int"),
+        (msgpack.packb({"v": 2, "kind": "turn", "t": 1, "agent": 0, "deps": b"", "controls": b""}), "wire version 2, expected 3"),
+        (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": 1, "agent": 0, "deps": b"", "controls": b""}), "turn has no field 'epoch'"),
     ],
 )
 def test_bad_messages_name_the_key_and_field(payload: bytes, message: str) -> None:

@@ -546,14 +546,14 @@ def test_takeover_fences_the_first_coordinator_and_keeps_the_uninterrupted_decis
     agents follow the new run epoch, and the decisions are those of the in-process run."""
     from coordinator.fleet import in_process, resumed_config
 
-    run, run_dir, minutes, out = "fence", tmp_path / "run", 10, tmp_path / "second.json"
-    first = _coordinator(bus, run, "--run-dir", str(run_dir), minutes=minutes, deadline=60, minute_s=0.4)
+    run, run_dir, minutes, out = "fence", tmp_path / "run", 12, tmp_path / "second.json"
+    first = _coordinator(bus, run, "--run-dir", str(run_dir), minutes=minutes, deadline=60, minute_s=3.0)  # room for a second to start
     agents = [bus.agent(i, run, grace=90) for i in range(3)]
     second = None
     try:
-        first.wait_for(f"minute 3/{minutes}")
+        first.wait_for(f"minute 1/{minutes}")
         second = Logged([*CLI, "coordinator", *bus.flags, "--resume", str(run_dir), "--takeover", "--json", str(out)])
-        assert first.finish(180) == 2, first.text
+        assert first.finish(180) == 2, first.text + "\n---\n" + second.text
         assert second.finish(300) == 0, second.text
         assert [a.finish(60) for a in agents] == [0, 0, 0], "\n".join(a.text for a in agents)
     finally:
@@ -564,6 +564,6 @@ def test_takeover_fences_the_first_coordinator_and_keeps_the_uninterrupted_decis
     assert "was taken over by the coordinator of run epoch" in first.text and "published stop" not in first.text
     assert all("took the run over from epoch" in a.text for a in agents)
     result = json.loads(out.read_text())
-    assert result["resumed_at_minute"] >= 3 and len(result["controls"]) == minutes and result["fallbacks"] == 0
+    assert 1 <= result["resumed_at_minute"] < minutes and len(result["controls"]) == minutes and result["fallbacks"] == 0
     ref = in_process(resumed_config(str(run_dir)))
     assert result["decisions_sha256"] == ref["decisions_sha256"] and result["total_cost"] == ref["total_cost"]
