@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import socket
 import sys
@@ -24,12 +25,14 @@ ROUTER_LOG = "warn,zenoh::net::routing::interceptor::access_control=info"
 def router_main(bus: SessionArgs, announce: bool = False) -> None:
     """Open a router session and hold it until SIGTERM or SIGINT; with ``announce``, say where it listens once it does.
 
-    ``announce`` (``surge router``) also turns on the log of :data:`ROUTER_LOG`.  A local fleet's own router
+    ``announce`` (``surge router``) also turns on the log of :data:`ROUTER_LOG`, on stderr.  A local fleet's own router
     stays quiet: its launcher probes the port with bare TCP connections, which zenoh would log as failed handshakes.
     """
     if bus.mode != "router":
         raise ConfigError(f"router_main needs mode 'router', got {bus.mode!r}")
     if announce:
+        sys.stdout.flush()
+        os.dup2(sys.stderr.fileno(), sys.stdout.fileno())  # zenoh logs to stdout: one stream for the router's whole log
         zenoh.init_log_from_env_or(ROUTER_LOG)
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
