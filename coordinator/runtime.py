@@ -294,10 +294,12 @@ class Coordinator:
             c = check_control(decode(payload, Control, key), key, self.bounds)  # type: ignore[arg-type]
             if c.by != "agent":
                 raise WireError(f"{key}: a proposed control must say by='agent', not {c.by!r}")
+            now = self.obs is not None and c.t == self.obs.t
+            if now:
+                check_choice(c, key, candidate_controls(self.city, self.obs, c.agent))  # type: ignore[union-attr]
             if c.epoch != self.epoch:
                 raise WireError(f"{key}: a control for run epoch {c.epoch}, this coordinator's is {self.epoch}")
-            if self.obs is not None and c.t == self.obs.t:
-                check_choice(c, key, candidate_controls(self.city, self.obs, c.agent))
+            if now:
                 self.health.ack(c.agent, c.t, current)
             if want is not None and (c.t, c.agent) in want:
                 return c

@@ -144,7 +144,7 @@ def junk(rng: random.Random, depth: int = 0):  # noqa: ANN201
     return {rng.choice(keys): junk(rng, depth + 1) for _ in range(rng.randrange(0, 6))}
 
 
-def fuzz_payload(rng: random.Random, agent: int, now: int) -> bytes:
+def fuzz_payload(rng: random.Random, agent: int, now: int, epoch: int) -> bytes:
     """Random structure, or a well-formed control whose values are out of range for the receiver."""
     kind = rng.randrange(4)
     if kind == 0:
@@ -152,10 +152,11 @@ def fuzz_payload(rng: random.Random, agent: int, now: int) -> bytes:
     if kind == 1:
         return msgpack.packb(junk(rng), use_bin_type=True)
     if kind == 2:  # well-formed, the right minute and agent, a control that no taxi has
-        return control(now, agent, rng.choice([-2**40, -5, -2, 2**31 - 1, 2**40, 10**6]))
+        return control(now, agent, rng.choice([-2**40, -5, -2, 2**31 - 1, 2**40, 10**6]), epoch=epoch)
     fields = {"t": rng.choice([now, -1, 10**9, 2**40]), "agent": rng.choice([agent, agent + 1, -1, 2**31, 99]),
               "control": rng.choice([-7, 2**40, 10**6]), "by": rng.choice(["agent", "base", "x"]),
-              "plan_s": rng.choice([0.0, -1.0, math.nan, math.inf]), "rss_mb": rng.choice([0.0, 1e300, -3.0])}
+              "plan_s": rng.choice([0.0, -1.0, math.nan, math.inf]), "rss_mb": rng.choice([0.0, 1e300, -3.0]),
+              "epoch": rng.choice([epoch, epoch, epoch - 1, -1, 2**64 - 1])}
     return msgpack.packb({"v": rng.choice([1, 2, 2, 3]), "kind": rng.choice(["control", "control", "turn"]), **fields},
                          use_bin_type=True)
 
@@ -178,7 +179,10 @@ def attack(a: dict) -> dict:
     block = zenoh.CongestionControl.BLOCK
     pubs = {n: sessions[n].declare_publisher(f"{root}/control/{int(n.split('-')[1])}", congestion_control=block) for n in a["fuzzers"]}
     forge = {n: sessions[n].declare_publisher(f"{root}/control/{victim}", congestion_control=block) for n in a["attackers"]}
-    now, stay, epoch, stopped, answered = 0, 0, 0, False, set()
+    now, stay, stopped, answered = 0, 0, False, set()
+    # the run epoch, as a taxi learns it: from the coordinator's token (and then from every state)
+    tokens = sessions[a["fuzzers"][0]].liveliness().get(f"{root}/coordinator/*", timeout=5.0)
+    epoch = max([int(str(r.ok.key_expr).rsplit("/", 1)[1]) for r in tokens if r.ok is not None], default=0)
 
     def forge_all(t: int) -> None:
         for n, p in forge.items():
@@ -218,10 +222,10 @@ def attack(a: dict) -> dict:
             for _ in range(25):
                 roll = rng.random()
                 if roll < 0.85:
-                    pubs[name].put(fuzz_payload(rng, me, now))
+                    pubs[name].put(fuzz_payload(rng, me, now, epoch))
                     out["fuzz_controls"] += 1
                 elif roll < 0.95:
-                    s.get(f"{root}/{rng.choice(['spec', 'snapshot'])}", payload=fuzz_payload(rng, me, now), timeout=1.0)
+                    s.get(f"{root}/{rng.choice(['spec', 'snapshot'])}", payload=fuzz_payload(rng, me, now, epoch), timeout=1.0)
                 else:
                     s.liveliness().declare_token(f"{root}/alive/{me}").undeclare()
                 out["fuzzed"] += 1

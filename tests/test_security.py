@@ -186,7 +186,7 @@ def test_forged_stays_and_a_fuzz_flood_change_nothing(secured: dict, tmp_path: P
     on_controls = sum(n for kind, n in result["rejected_messages"].items() if kind.startswith("control:"))
     assert on_controls + result["stale_messages"] == attack["fuzz_controls"]
     log = "".join(err)
-    assert "ignored: surge/attack/control/" in log and "not one of its controls" in log
+    assert "ignored: surge/attack/control/" in log and "not one of its controls" in log, [x for x in err if "ignored" in x]
     assert log.count("ignored:") <= len(result["rejected_messages"])  # at most one line per kind, not one per message
     assert os.path.getsize(out) > 0
 
@@ -345,3 +345,57 @@ def test_insecure_says_so_in_one_line(tmp_path: Path) -> None:
     conf = json.loads(proc.stdout)
     assert conf["listen"]["endpoints"] == ["tls/127.0.0.1:7447"] and conf["transport"]["link"]["protocols"] == ["tls"]
     assert {k for r in conf["access_control"]["rules"] for k in r["key_exprs"]} >= {"surge/r1/control/1", "surge/r1/state"}
+
+
+def test_an_agent_follows_the_highest_run_epoch_and_drops_a_fenced_coordinators_messages(capsys: pytest.CaptureFixture) -> None:
+    """Tokens of epochs 5 and then 9: the state, turn and stop of epoch 5 are dropped, and the turn of epoch 9 is answered
+    with epoch 9; epoch 5's token going does not count as the coordinator gone."""
+    import numpy as np
+
+    from agents.rollout import candidate_controls
+    from bus.delta import state_message
+    from bus.forecasts import sector_message
+    from bus.session import Inbox
+    from bus.wire import Control, Dropoffs, Stop, Turn, decode
+    from city.forecast import Forecast
+    from city.sim import Observation
+
+    agent, _ = _agent(run="e")
+    k, n, S = agent.keys, agent.city.n_nodes, agent.city.n_sectors
+    obs = Observation(t=0, pos=np.array([0, 5, 9], np.int32), tau=np.zeros(3, np.int32), dest=np.full(3, -1, np.int32),
+                      req_index=np.zeros(0, np.int64), req_pickup=np.zeros(0, np.int32), req_dropoff=np.zeros(0, np.int32),
+                      req_entry=np.zeros(0, np.int32))
+    base = np.array([0, 5, 9], dtype=np.int32)
+    fc = Forecast(eta=np.full(S, 0.5), rho=np.ones(n), delta=np.ones(n), beta=np.full((S, S), 1.0 / S))
+    ok = int(candidate_controls(agent.city, obs, 0)[-1])
+    sent = []
+
+    class Out:
+        def put(self, payload: bytes) -> None:
+            sent.append(decode(payload, Control))
+
+    def turn(epoch: int) -> bytes:
+        return Turn(t=0, agent=1, deps=np.array([0], np.int32), controls=np.array([ok], np.int32), epoch=epoch).encode()
+
+    inbox = Inbox()
+    for item in [
+        ("coordinator", k.coordinator(5), True),
+        ("coordinator", k.coordinator(9), True),  # a takeover
+        ("state", k.state, state_message(obs, None, base, 5).encode()),
+        ("stop", k.stop, Stop(t=1, epoch=5, reason="the coordinator was stopped (exit 143)").encode()),
+        ("state", k.state, state_message(obs, None, base, 9).encode()),
+        *[("forecast", k.forecast(s), sector_message(fc, agent.city, 0, s).encode()) for s in range(S)],
+        ("dropoffs", k.dropoffs, Dropoffs(hour=0, delta=fc.delta).encode()),
+        ("turn", k.turn(1), turn(5)),
+        ("turn", k.turn(1), turn(9)),
+        ("coordinator", k.coordinator(5), False),  # the fenced coordinator leaves
+        ("stop", k.stop, Stop(t=4, epoch=9).encode()),
+    ]:
+        inbox.put(*item)
+    agent._loop(None, inbox, Out())
+    err = capsys.readouterr().err
+    assert "the coordinator of run epoch 9 took the run over from epoch 5" in err
+    for what in ("state", "stop", "turn"):
+        assert f"a {what} of run epoch 5, whose coordinator was taken over by epoch 9" in err, what
+    assert [(c.t, c.agent, c.epoch) for c in sent] == [(0, 1, 9)] and agent.decisions == 1
+    assert agent.epoch == 9 and agent.coordinator_gone is None
