@@ -21,15 +21,10 @@ every way out, checkpoints each minute to its run directory
 (:mod:`coordinator.checkpoint`, ``--resume``), and tells a partition from
 single failures and a hung agent from a live one (:mod:`coordinator.faults`).
 
-One coordinator drives a run.  Each has a run epoch, its start in
-milliseconds since 1970 (UTC), raised above any epoch it has seen, and holds
-the liveliness token ``coordinator/<epoch>``.  A coordinator that finds
-another's token alive refuses to start; with ``takeover`` it declares its
-token first, which fences the old one: agents drop every state, turn and
-stop of a lower epoch than the highest they have seen, and the old
-coordinator, on seeing the higher token, stops at once without another
-checkpoint or stop.  The run directory is locked (:func:`checkpoint.locked`)
-for as long as a coordinator plays from it.
+One coordinator drives a run (:mod:`coordinator.claim`): a coordinator that
+finds another's token alive refuses to start, or with ``takeover`` fences it
+by a higher run epoch; one that sees a higher epoch's token stops.  The run
+directory is locked (:func:`checkpoint.locked`) while a coordinator plays from it.
 
 A proposed control counts only if it is on its own agent's key, for the
 current minute, and one of that agent's candidate controls; anything else is
@@ -43,7 +38,6 @@ from __future__ import annotations
 import datetime as dt
 import sys
 import time
-from collections.abc import Iterable
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -61,11 +55,12 @@ from bus.forecasts import ForecastPublisher, sector_message
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
 from bus.wire import ENCODING, Ack, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
-from city.errors import ConfigError, SurgeError
+from city.errors import ConfigError
 from city.fingerprint import city_sha256, code_version
 from city.forecast import Forecast
 from city.sim import FleetSim, Observation, Requests, decisions_hash
 from coordinator import checkpoint
+from coordinator.claim import TAKEOVER_WAIT_S, TakenOver, claim, epoch_time, taken_over
 from coordinator.faults import ACK_WAIT_S, RESEND_S, SETTLE_S, Health, PartitionError, agents_text
 from coordinator.metrics import Counted
 
@@ -135,26 +130,6 @@ def log(message: str) -> None:
     print(f"surge coordinator: {message}", file=sys.stderr, flush=True)
 
 
-class TakenOver(SurgeError):
-    """A coordinator of a higher run epoch took the run over: this one stops, with no further checkpoint or stop."""
-
-
-#: Seconds a coordinator asks the router for the run's live coordinator tokens before it starts.
-LIVE_QUERY_S = 3.0
-#: Seconds a coordinator that takes a run over waits for the fenced one to release the run directory's lock.
-TAKEOVER_WAIT_S = 60.0
-
-
-def new_epoch(seen: Iterable[int]) -> int:
-    """A run epoch above every one in ``seen``: now in milliseconds since 1970 (UTC), raised if this host's clock is behind."""
-    return max([time.time_ns() // 1_000_000, *(e + 1 for e in seen)])
-
-
-def epoch_time(epoch: int) -> str:
-    """When the coordinator of run epoch ``epoch`` started (to the second, UTC)."""
-    return dt.datetime.fromtimestamp(epoch / 1000, dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
-
-
 class Coordinator:
     """Runs one episode over the bus; :meth:`run` returns its metrics and decisions."""
 
@@ -209,39 +184,6 @@ class Coordinator:
             raise ConfigError(f"{self.run_dir / checkpoint.CHECKPOINT}: run {self.cfg.run!r} finished "
                               f"(minute {self.cfg.minutes} of {self.cfg.minutes}); nothing to resume")
 
-    # ------------------------------------------------------------------ claim
-    def _live_epochs(self, session) -> list[int]:  # noqa: ANN001
-        """The run epochs of the run's coordinators whose tokens are alive now."""
-        epochs = []
-        for reply in session.liveliness().get(self.keys.all_coordinators, timeout=LIVE_QUERY_S):
-            if reply.ok is not None and (e := Keys.agent_of(str(reply.ok.key_expr))) is not None:
-                epochs.append(e)
-        return epochs
-
-    def _claim(self, session, stack: ExitStack) -> bool:  # noqa: ANN001
-        """Choose this coordinator's run epoch; refuse a run with a live coordinator, or fence it with ``takeover`` (``True``).
-
-        The fence is this coordinator's token, declared at once: the agents
-        drop the old coordinator's messages from then on, and the old
-        coordinator stops when it sees it (and so releases the run directory).
-        """
-        live = self._live_epochs(session)
-        done = [checkpoint.epoch_of(self.run_dir)] if self.resume and self.run_dir is not None else []
-        self.epoch = new_epoch([*live, *done])
-        if not live:
-            return False
-        old = max(live)
-        if not self.takeover:
-            verb = "resume" if self.resume else "start"
-            raise ConfigError(f"run {self.cfg.run!r} has a live coordinator (run epoch {old}, since {epoch_time(old)}): "
-                              f"refusing to {verb} a second one, which would drive the same agents; if that coordinator is "
-                              f"unreachable rather than dead, --takeover fences it and takes the run over")
-        token = session.liveliness().declare_token(self.keys.coordinator(self.epoch))
-        stack.callback(token.undeclare)
-        log(f"taking run {self.cfg.run!r} over from the coordinator of run epoch {old} (since {epoch_time(old)}): "
-            f"its turns are dropped from now on; this one is epoch {self.epoch}")
-        return True
-
     # ------------------------------------------------------------------ inbox
     def _handle(self, item: tuple[str, str, object], want: set[tuple[int, int]] | None = None) -> Control | None:
         """Serve queries, track liveliness, and return the control if this item is one of ``want``'s (t, agent).
@@ -256,9 +198,7 @@ class Coordinator:
             self.rejected.exception(tag, key, exc)
             out = None
         if self.fenced_by is not None:
-            raise TakenOver(f"run {self.cfg.run!r} was taken over by the coordinator of run epoch {self.fenced_by} "
-                            f"(since {epoch_time(self.fenced_by)}); this one (epoch {self.epoch}) stops at minute "
-                            f"{self.sim.state.t} without writing its checkpoint again")
+            raise taken_over(self.cfg.run, self.fenced_by, self.epoch, int(self.sim.state.t))
         return out
 
     def _handle_one(self, tag: str, key: str, payload: object, want: set[tuple[int, int]] | None) -> Control | None:
@@ -333,7 +273,9 @@ class Coordinator:
         """Play the episode; ``Stop`` goes out on every way out (done, an error, SIGTERM, Ctrl-C), with the reason."""
         with open_session(bus) as session, ExitStack() as stack:
             inbox = Inbox()
-            fenced = self._claim(session, stack)
+            resumed = checkpoint.epoch_of(self.run_dir) if self.resume and self.run_dir is not None else 0
+            claimed = claim(session, self.keys, stack, resume=self.resume, takeover=self.takeover, resumed_epoch=resumed)
+            self.epoch, fenced = claimed.epoch, claimed.fenced
             if self.run_dir is not None:  # after a takeover, wait for the fenced coordinator to let go of it
                 stack.enter_context(checkpoint.locked(self.run_dir, self.cfg.run, self.epoch, TAKEOVER_WAIT_S if fenced else 0.0))
             if self.resume:
