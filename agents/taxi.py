@@ -29,6 +29,12 @@ token has been gone longer than the grace period it leaves, in one line.  A turn
 want of its minute's state, or one it already answered, tells it what was
 lost: it takes a snapshot, or sends its control again.
 
+Fencing: every state, turn and stop carries its coordinator's run epoch, and
+each coordinator holds the token ``coordinator/<epoch>``.  The agent follows
+the highest epoch it has seen and drops whatever comes from a lower one, so
+a coordinator that another took over (``--takeover``) steers nothing; its
+control answers a turn with the turn's epoch.
+
 This module must not import torch: forecasts arrive on the bus.
 """
 
@@ -141,6 +147,10 @@ class TaxiAgent:
         self.coordinator_seen = False
         #: Whether the coordinator's current absence has been logged.
         self.gone_logged = False
+        #: The highest run epoch seen (a coordinator's token, state, turn or stop): lower ones are fenced.
+        self.epoch = 0
+        #: The run epochs whose coordinator tokens are present.
+        self.live: set[int] = set()
         #: Since when the pending turn waits for its state.
         self.stalled: float | None = None
         #: This host's cores, shared with the run's other agents planning at the same time (``threads="share"``).
@@ -169,7 +179,7 @@ class TaxiAgent:
             out = publisher(session, self.keys.control(self.me))
             self.ack_pub = publisher(session, self.keys.ack(self.me))
             self.coordinator_gone = time.monotonic()  # until its token is seen
-            subs.append(inbox.watch_liveliness(session, self.keys.coordinator, "coordinator"))
+            subs.append(inbox.watch_liveliness(session, self.keys.all_coordinators, "coordinator"))
             self._snapshot(session)  # before the token: a rejoining agent holds the minute when its turn comes
             token = session.liveliness().declare_token(self.keys.alive(self.me))
             log(self.me, f"joined run {spec.run!r} ({spec.policy}, {spec.taxis} taxis)")
@@ -249,6 +259,7 @@ class TaxiAgent:
             try:
                 snap = decode(reply.ok.payload.to_bytes(), Snapshot, key)
                 state = check_state(decode(snap.state, State, key), key, self.bounds)  # type: ignore[arg-type]
+                self._current(state.epoch, key, "snapshot")
                 if not state.full:
                     raise WireError(f"{key}: a snapshot's state must be full")
                 if snap.forecast:  # empty before the run's first minute
@@ -282,18 +293,26 @@ class TaxiAgent:
     def _minute(self) -> int | None:
         return None if self.view.obs is None else int(self.view.obs.t)
 
+    def _current(self, epoch: int, key: str, what: str) -> None:
+        """Drop a message of a fenced coordinator (an epoch below the highest seen); a higher epoch is followed from now on."""
+        if epoch < self.epoch:
+            raise WireError(f"{key}: a {what} of run epoch {epoch}, whose coordinator was taken over by epoch {self.epoch}")
+        self.epoch = epoch
+
     def handle(self, session, tag: str, key: str, payload: bytes) -> bool:  # noqa: ANN001
         """Check and apply one message; ``False`` when it is the run's stop."""
         if tag == "stop":
             stop = check_stop(decode(payload, Stop, key), key, self.bounds)  # type: ignore[arg-type]
+            self._current(stop.epoch, key, "stop")
             if stop.reason != "done":
                 log(self.me, f"the coordinator ended the run at minute {stop.t}: {stop.reason}")
             return False
         if tag == "coordinator":
-            self._on_coordinator(session, bool(payload))
+            self._on_coordinator(session, key, bool(payload))
             return True
         if tag == "state":
             msg = check_state(decode(payload, State, key), key, self.bounds)  # type: ignore[arg-type]
+            self._current(msg.epoch, key, "state")
             if self.view.apply(msg):
                 self._follow()
                 self._ack()
@@ -306,24 +325,44 @@ class TaxiAgent:
             self.forecasts.on_dropoffs(payload, key)
         elif tag == "turn":
             turn = decode(payload, Turn, key)
+            self._current(turn.epoch, key, "turn")  # type: ignore[attr-defined]
             minute = self._minute()
             if minute is not None and max(0, minute - 60) <= turn.t < minute and turn.agent == self.me:  # type: ignore[attr-defined]
                 return True  # a turn of a minute the run has left behind (queued while this agent was stopped)
             self.pending = check_turn(turn, key, self.me, self.bounds, minute)  # type: ignore[arg-type]
         return True
 
-    def _on_coordinator(self, session, present: bool) -> None:  # noqa: ANN001
-        """The coordinator's token came or went; when it comes back, what was published meanwhile is lost: take a snapshot."""
+    def _on_coordinator(self, session, key: str, present: bool) -> None:  # noqa: ANN001
+        """A coordinator's token came or went.
+
+        The coordinator is present while a token of the highest epoch seen is.
+        When it comes back, or a higher epoch takes the run over, what was
+        published meanwhile is lost or fenced: take a snapshot.
+        """
+        epoch = Keys.agent_of(key)
+        if epoch is None:
+            raise WireError(f"{key}: a coordinator token without a run epoch")
+        (self.live.add if present else self.live.discard)(epoch)
+        if epoch < self.epoch:
+            return  # a fenced coordinator's token
+        newer = present and epoch > self.epoch
+        if newer and self.coordinator_seen:
+            log(self.me, f"the coordinator of run epoch {epoch} took the run over from epoch {self.epoch}; "
+                         f"the older one's messages are dropped from now on")
+        if present:
+            self.epoch = epoch
+        here = any(e >= self.epoch for e in self.live)
         if not self.coordinator_seen:
-            self.coordinator_seen, self.coordinator_gone = present, None if present else self.coordinator_gone
+            self.coordinator_seen, self.coordinator_gone = here, None if here else self.coordinator_gone
             return
-        if not present:
+        if not here:
             if self.coordinator_gone is None:
                 self.coordinator_gone, self.gone_logged = time.monotonic(), False
             return
         was_gone, self.coordinator_gone = self.coordinator_gone, None
         if was_gone is not None and self.view.obs is not None:
             log(self.me, f"the coordinator is back after {time.monotonic() - was_gone:.1f} s; taking a snapshot")
+        if (was_gone is not None or newer) and self.view.obs is not None:
             self._snapshot(session)
 
     def _check_health(self, session) -> None:  # noqa: ANN001
@@ -356,7 +395,7 @@ class TaxiAgent:
         for a, c in zip(turn.deps.tolist(), turn.controls.tolist()):
             if obs.tau[a] > 0:
                 raise WireError(f"{key}: agent {a} is busy at minute {obs.t}; it commits no control")
-            check_choice(Control(t=turn.t, agent=a, control=c), key, candidate_controls(self.city, obs, a))
+            check_choice(Control(t=turn.t, agent=a, control=c, epoch=turn.epoch), key, candidate_controls(self.city, obs, a))
             committed[a] = c
         return committed
 
@@ -393,6 +432,9 @@ class TaxiAgent:
 
     def _maybe_plan(self, out) -> None:  # noqa: ANN001
         turn, obs = self.pending, self.view.obs
+        if turn is not None and turn.epoch < self.epoch:
+            self.pending = None  # a turn of a coordinator taken over since it came
+            return
         if turn is not None and obs is not None and turn.t < obs.t:
             self.pending = None  # the run has moved on without this agent's answer
             return
@@ -401,7 +443,8 @@ class TaxiAgent:
         self.pending = None  # a turn is planned, answered again, or dropped, once
         committed = self._predecessors(turn)
         if self.sent is not None and self.sent.t == turn.t and np.array_equal(self.sent_with, committed):
-            out.put(self.sent.encode())  # a repeated turn, with the same predecessors: the first answer may have been lost
+            # a repeated turn, with the same predecessors (perhaps from a coordinator that took over): the first answer may have been lost
+            out.put(dataclasses.replace(self.sent, epoch=turn.epoch).encode())
             return
         t0 = time.perf_counter()
         if self.share is None:
@@ -411,7 +454,8 @@ class TaxiAgent:
                 control = plan_agent(self.context, committed, self.me, threads=self.share.threads)
         plan_s = time.perf_counter() - t0
         rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        self.sent, self.sent_with = Control(t=turn.t, agent=self.me, control=int(control), plan_s=plan_s, rss_mb=rss_mb), committed
+        self.sent = Control(t=turn.t, agent=self.me, control=int(control), epoch=turn.epoch, plan_s=plan_s, rss_mb=rss_mb)
+        self.sent_with = committed
         out.put(self.sent.encode())
         self.decisions += 1
 

@@ -73,7 +73,7 @@ _DECLARATIONS = {"declare_subscriber", "declare_queryable"}
 def _key_for(channel: Channel, run_root: str, role: str, index: int | None, writing: bool, flow: str,
              messages: tuple[str, ...]) -> str:
     """A taxi's own per-agent key, or every agent's; a writer learns of subscriptions to every agent's."""
-    if channel.per_sector:
+    if channel.per_sector or channel.per_epoch:
         return key(run_root, channel.name, "*")
     if not channel.per_agent:
         return key(run_root, channel.name)

@@ -10,6 +10,11 @@ Keys are ECDSA P-256 in unencrypted PKCS#8 PEM files of mode 0600 (zenoh
 reads them at start-up; it cannot prompt for a pass phrase).  The CA's key
 is written next to its certificate so more credentials can be issued; it
 is needed on no fleet host and should be kept off them.
+
+Before a process connects it checks its own credentials
+(:func:`check_credentials`), so that an expired certificate, one from
+another CA, or another role's certificate is one line naming what is wrong,
+rather than zenoh's "unable to connect" that looks like a missing router.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import datetime as dt
 import ipaddress
 import json
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,6 +57,66 @@ class Identity:
             if not path.is_file():
                 raise ConfigError(f"credentials of {self.name}: {path}: no such file (make them with `surge certs`)")
         return self
+
+
+def role_of(common_name: str) -> str | None:
+    """The role a certificate's common name claims (``taxi`` for ``taxi-<i>``), or ``None`` for no role of surge."""
+    if re.fullmatch(r"taxi-(0|[1-9][0-9]*)", common_name):
+        return "taxi"
+    return common_name if common_name in ROLES else None
+
+
+def check_credentials(ident: Identity, now: dt.datetime | None = None) -> None:
+    """Raise :class:`ConfigError`, in one line, if ``ident``'s certificate cannot get it onto the bus as ``ident.name``.
+
+    Checked in this order: the files parse; the CA and the certificate are
+    within their validity; the certificate was signed by the CA given
+    (``ca.pem`` of the same directory); its common name is ``ident.name``
+    (the role the router grants is the common name's); the key is the
+    certificate's.
+    """
+    from cryptography import x509
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.x509.oid import NameOID
+
+    who = f"credentials of {ident.name}"
+    ident.check()
+    try:
+        ca = x509.load_pem_x509_certificate(ident.ca.read_bytes())
+    except ValueError:
+        raise ConfigError(f"{who}: {ident.ca} is not a PEM certificate") from None
+    try:
+        cert = x509.load_pem_x509_certificate(ident.cert.read_bytes())
+    except ValueError:
+        raise ConfigError(f"{who}: {ident.cert} is not a PEM certificate") from None
+    now = now or dt.datetime.now(dt.timezone.utc)
+    for path, c in ((ident.ca, ca), (ident.cert, cert)):
+        if now > c.not_valid_after_utc:
+            raise ConfigError(f"{who}: {path} expired on {c.not_valid_after_utc:%Y-%m-%d %H:%M} UTC; make new credentials with "
+                              f"`surge certs` (or renew them with the fleet's CA)")
+        if now < c.not_valid_before_utc:
+            raise ConfigError(f"{who}: {path} is not valid until {c.not_valid_before_utc:%Y-%m-%d %H:%M} UTC; "
+                              f"check this host's clock")
+    try:
+        cert.verify_directly_issued_by(ca)
+    except Exception:  # cryptography raises ValueError, TypeError or InvalidSignature
+        raise ConfigError(f"{who}: {ident.cert} was not issued by the CA in {ident.ca} (its issuer is "
+                          f"'{cert.issuer.rfc4514_string()}'): the router admits only certificates of the fleet's CA; use "
+                          f"the certificate made with that CA, or that CA's ca.pem") from None
+    names = cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+    cn = str(names[0].value) if names else ""
+    if cn != ident.name:
+        claimed = role_of(cn)
+        what = f"role {claimed!r}" if claimed == cn else (f"role {claimed!r} as {cn!r}" if claimed else "no role of surge")
+        raise ConfigError(f"{who}: {ident.cert} has common name {cn!r}, which claims {what}, not {ident.name!r}: the router "
+                          f"grants each session its common name's rights; give this process {ident.name}'s own certificate")
+    try:
+        key = serialization.load_pem_private_key(ident.key.read_bytes(), password=None)
+    except (ValueError, TypeError):
+        raise ConfigError(f"{who}: {ident.key} is not an unencrypted PEM private key") from None
+    if key.public_key().public_bytes(serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo) != \
+            cert.public_key().public_bytes(serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo):
+        raise ConfigError(f"{who}: {ident.key} is not the key of {ident.cert}")
 
 
 def identity(certs_dir: str | Path, name: str) -> Identity:

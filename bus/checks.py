@@ -59,8 +59,19 @@ def _within(where: str, name: str, arr: np.ndarray, lo: int, hi: int) -> None:
         raise WireError(f"{where}: field {name!r} holds {int(bad)}, outside {lo}..{hi - 1}")
 
 
+#: The largest run epoch (a coordinator's start in milliseconds since 1970, :mod:`coordinator.runtime`).
+MAX_EPOCH = 2**63 - 1
+
+
+def check_epoch(key: str, epoch: int) -> None:
+    """A run epoch is a non-negative 64-bit integer."""
+    if not 0 <= epoch <= MAX_EPOCH:
+        raise WireError(f"{key}: field 'epoch' is {epoch}, outside 0..2^63-1")
+
+
 def check_state(msg: State, key: str, b: Bounds) -> State:
     """A state of this run: one entry per taxi, nodes of this city, a minute of the episode."""
+    check_epoch(key, msg.epoch)
     if len(msg.pos) != b.taxis:
         raise WireError(f"{key}: field 'pos' has {len(msg.pos)} taxis, the run has {b.taxis}")
     if not 0 <= msg.t <= b.minutes:
@@ -131,6 +142,7 @@ def check_dropoffs(msg: Dropoffs, key: str, b: Bounds) -> Dropoffs:
 
 def check_control(msg: Control, key: str, b: Bounds, t: int | None = None) -> Control:
     """A control on its own agent's key, for an agent of this fleet (and minute ``t``), with sane reports."""
+    check_epoch(key, msg.epoch)
     if Keys.agent_of(key) != msg.agent:
         raise WireError(f"{key}: control of agent {msg.agent} on another agent's key")
     if not 0 <= msg.agent < b.taxis:
@@ -160,6 +172,7 @@ def check_turn(msg: Turn, key: str, me: int, b: Bounds, t: int | None) -> Turn:
     Zenoh orders samples per key, not across keys: a turn can overtake the
     states before it by many minutes, and the agent holds it until its state.
     """
+    check_epoch(key, msg.epoch)
     if msg.agent != me or Keys.agent_of(key) != me:
         raise WireError(f"{key}: a turn for agent {msg.agent}, this is agent {me}")
     if t is not None and msg.t < t:
@@ -175,6 +188,7 @@ def check_turn(msg: Turn, key: str, me: int, b: Bounds, t: int | None) -> Turn:
 
 def check_stop(msg: Stop, key: str, b: Bounds) -> Stop:
     """The end of this run: after the episode's last minute (``done``), or earlier with the reason it was ended."""
+    check_epoch(key, msg.epoch)
     if msg.reason == "done" and msg.t != b.minutes:
         raise WireError(f"{key}: field 't' is {msg.t}, the run ends after minute {b.minutes}")
     if not 0 <= msg.t <= b.minutes:

@@ -14,10 +14,10 @@ from bus.wire import State
 from city.sim import Observation
 
 
-def state_message(obs: Observation, previous: np.ndarray | None, base: np.ndarray) -> State:
+def state_message(obs: Observation, previous: np.ndarray | None, base: np.ndarray, epoch: int = 0) -> State:
     """The state of minute ``obs.t`` as a delta against the outstanding request indices ``previous``, with the minute's ``base`` controls.
 
-    ``previous=None`` gives a full state.
+    ``previous=None`` gives a full state; ``epoch`` is the sending coordinator's run epoch.
     """
     full = previous is None
     now = np.asarray(obs.req_index, dtype=np.int64)
@@ -26,7 +26,7 @@ def state_message(obs: Observation, previous: np.ndarray | None, base: np.ndarra
     return State(
         t=int(obs.t), full=full, pos=obs.pos, tau=obs.tau, dest=obs.dest,
         new_index=now[new].astype(np.int32), new_pickup=obs.req_pickup[new], new_dropoff=obs.req_dropoff[new],
-        new_entry=obs.req_entry[new], picked=picked, outstanding=int(now.size), base=base,
+        new_entry=obs.req_entry[new], picked=picked, outstanding=int(now.size), base=base, epoch=epoch,
     )
 
 

@@ -20,12 +20,15 @@ key                        who writes                  what
 ``alive/<agent>``          agent (liveliness token)    present while the agent runs
 ``predictor``              predictor (queryable)       :class:`~bus.wire.ForecastMsg` for a :class:`~bus.wire.ForecastRequest`
 ``stop``                   coordinator                 :class:`~bus.wire.Stop`
-``coordinator``            coordinator (liveliness)    present while the coordinator runs
+``coordinator/<epoch>``    coordinator (liveliness)    present while the coordinator of run epoch ``<epoch>`` runs
 ``ack/<agent>``            agent                       :class:`~bus.wire.Ack`: the agent holds minute ``t``'s state
 =========================  ==========================  ==============================
 
 The forecast keys have two possible writers: the predictor service when the
-run has one, else the coordinator.  ``docs/PROTOCOL.md`` is this table for a
+run has one, else the coordinator.  A coordinator also reads the
+``coordinator/*`` tokens: a live one of another epoch means the run has a
+coordinator already (refused, unless ``--takeover``), or a newer one has
+taken the run over (this one stops).  ``docs/PROTOCOL.md`` is this table for a
 third party, with every message's fields.
 """
 
@@ -52,7 +55,7 @@ class Channel:
     """One key of the scheme.
 
     ``per_agent`` keys end in an agent index, ``per_sector`` keys in a
-    sector index.  A taxi writes only its own per-agent keys; with
+    sector index, ``per_epoch`` keys in a run epoch.  A taxi writes only its own per-agent keys; with
     ``own_only`` it also reads only its own.  ``also_written_by`` are roles
     that may publish on the key besides ``writer``; ``answered_by`` is a role
     that also answers the readers' queries on it.
@@ -65,6 +68,7 @@ class Channel:
     readers: tuple[str, ...]
     own_only: bool = False
     per_sector: bool = False
+    per_epoch: bool = False
     also_written_by: tuple[str, ...] = ()
     answered_by: str | None = None
 
@@ -74,8 +78,8 @@ class Channel:
 
     @property
     def indexed(self) -> bool:
-        """The key ends in an index (an agent's or a sector's)."""
-        return self.per_agent or self.per_sector
+        """The key ends in an index (an agent's, a sector's or an epoch)."""
+        return self.per_agent or self.per_sector or self.per_epoch
 
 
 SCHEME: tuple[Channel, ...] = (
@@ -91,7 +95,7 @@ SCHEME: tuple[Channel, ...] = (
     Channel("alive", True, TOKEN, TAXI, (COORDINATOR, OBSERVER)),
     Channel("predictor", False, QUERYABLE, PREDICTOR, (COORDINATOR,)),
     Channel("stop", False, PUB, COORDINATOR, (TAXI, OBSERVER)),
-    Channel("coordinator", False, TOKEN, COORDINATOR, (TAXI, OBSERVER)),
+    Channel("coordinator", False, TOKEN, COORDINATOR, (TAXI, COORDINATOR, OBSERVER), per_epoch=True),
     Channel("ack", True, PUB, TAXI, (COORDINATOR,)),
 )
 
@@ -136,7 +140,7 @@ class Keys:
         self.all_controls = key(self.root, "control", "*")
         self.all_committed = key(self.root, "committed", "*")
         self.all_alive = key(self.root, "alive", "*")
-        self.coordinator = key(self.root, "coordinator")
+        self.all_coordinators = key(self.root, "coordinator", "*")
         self.all_acks = key(self.root, "ack", "*")
 
     def forecast(self, sector: int) -> str:
@@ -156,6 +160,10 @@ class Keys:
 
     def ack(self, agent: int) -> str:
         return key(self.root, "ack", agent)
+
+    def coordinator(self, epoch: int) -> str:
+        """The liveliness token of the run's coordinator of run epoch ``epoch``."""
+        return key(self.root, "coordinator", epoch)
 
     @staticmethod
     def agent_of(key: str) -> int | None:

@@ -2,21 +2,38 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import socket
 import sys
 import threading
 import time
 
+import zenoh
+
 from bus.certs import fleet_size
 from bus.session import SessionArgs, open_session
 from city.errors import ConfigError
 
 
+#: What the router logs unless ``RUST_LOG`` says otherwise: zenoh's warnings, among them each TLS handshake it
+#: refuses with zenoh's reason (``invalid peer certificate: …``: expired, or ``BadSignature`` for another CA; zenoh
+#: does not say who), and each admitted session whose certificate no access rule names (by its zenoh id).
+ROUTER_LOG = "warn,zenoh::net::routing::interceptor::access_control=info"
+
+
 def router_main(bus: SessionArgs, announce: bool = False) -> None:
-    """Open a router session and hold it until SIGTERM or SIGINT; with ``announce``, say where it listens once it does."""
+    """Open a router session and hold it until SIGTERM or SIGINT; with ``announce``, say where it listens once it does.
+
+    ``announce`` (``surge router``) also turns on the log of :data:`ROUTER_LOG`, on stderr.  A local fleet's own router
+    stays quiet: its launcher probes the port with bare TCP connections, which zenoh would log as failed handshakes.
+    """
     if bus.mode != "router":
         raise ConfigError(f"router_main needs mode 'router', got {bus.mode!r}")
+    if announce:
+        sys.stdout.flush()
+        os.dup2(sys.stderr.fileno(), sys.stdout.fileno())  # zenoh logs to stdout: one stream for the router's whole log
+        zenoh.init_log_from_env_or(ROUTER_LOG)
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())

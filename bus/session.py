@@ -25,7 +25,7 @@ from typing import Any, Iterator
 import zenoh
 
 from bus.access import access_control
-from bus.certs import fleet_size, identity
+from bus.certs import check_credentials, fleet_size, identity
 from bus.wire import ENCODING
 from city.errors import ConfigError
 
@@ -76,6 +76,7 @@ class SessionArgs:
             if self.identity is None:
                 raise ConfigError("a secured session needs an identity (router, coordinator, predictor or taxi-<i>)")
             ident = identity(self.certs, self.identity)
+            check_credentials(ident)  # before connecting: an operator's one line, not zenoh's "unable to connect"
             tls: dict[str, Any] = {"root_ca_certificate": str(ident.ca), "enable_mtls": True}
             side = "listen" if self.mode == "router" else "connect"
             tls.update({f"{side}_certificate": str(ident.cert), f"{side}_private_key": str(ident.key)})

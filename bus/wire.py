@@ -25,7 +25,8 @@ from city.errors import SurgeError
 #: The zenoh encoding every payload of the run carries.
 ENCODING = "application/msgpack"
 #: Bumped whenever a message gains, loses or changes a field (docs/PROTOCOL.md, versioning).
-WIRE_VERSION = 2
+#: Version 3 added the run epoch to State, Turn, Control and Stop.
+WIRE_VERSION = 3
 
 
 class WireError(SurgeError, ValueError):
@@ -221,7 +222,8 @@ class State(Message):
     ``outstanding`` lets a receiver check that its copy kept up.  ``base`` is
     the base policy's joint control for minute ``t`` (a node id per taxi, or
     −1 for a pickup; a busy taxi's next hop), computed once by the
-    coordinator so that no agent recomputes it.
+    coordinator so that no agent recomputes it.  ``epoch`` is the run epoch
+    of the coordinator that sent it (:attr:`Turn.epoch`).
     """
 
     kind: ClassVar[str] = "state"
@@ -241,6 +243,7 @@ class State(Message):
     picked: np.ndarray
     outstanding: int
     base: np.ndarray
+    epoch: int
 
     def __post_init__(self) -> None:
         m, k = len(self.pos), len(self.new_index)
@@ -268,6 +271,11 @@ class Turn(Message):
     order: the agent plays every other predecessor at the state's ``base``
     control, which cannot change its costs (:mod:`agents.waves`).  Carrying
     them here spares the agent a subscription to every commitment.
+
+    ``epoch`` is the run epoch of the coordinator that sent it: a coordinator
+    that takes a run over (``--takeover``) starts a higher one, and an agent
+    drops whatever comes from a lower epoch than the highest it has seen, so
+    a fenced coordinator can no longer steer the fleet.
     """
 
     kind: ClassVar[str] = "turn"
@@ -276,6 +284,7 @@ class Turn(Message):
     agent: int
     deps: np.ndarray
     controls: np.ndarray
+    epoch: int
 
     def __post_init__(self) -> None:
         if len(self.deps) != len(self.controls):
@@ -288,12 +297,15 @@ class Control(Message):
 
     ``by`` is ``agent`` for a planned control and ``base`` when the
     coordinator committed the base policy's control for a silent agent.
+    ``epoch`` is the run epoch of the turn it answers (or of the committing
+    coordinator): a coordinator takes only controls of its own epoch.
     """
 
     kind: ClassVar[str] = "control"
     t: int
     agent: int
     control: int
+    epoch: int
     by: str = "agent"
     plan_s: float = 0.0
     #: The sender's peak resident memory, so the coordinator can report what an agent costs.
@@ -311,8 +323,12 @@ class Ack(Message):
 
 @dataclass(frozen=True)
 class Stop(Message):
-    """The run is over: ``reason`` is ``done`` after the last minute, anything else says why it ended at minute ``t``."""
+    """The run is over: ``reason`` is ``done`` after the last minute, anything else says why it ended at minute ``t``.
+
+    An agent obeys only the stop of the run epoch it follows (:attr:`Turn.epoch`).
+    """
 
     kind: ClassVar[str] = "stop"
     t: int
+    epoch: int
     reason: str = field(default="done")

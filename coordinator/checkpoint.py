@@ -10,23 +10,35 @@ and agents that rejoin it make the decisions of an uninterrupted run.
 
 The file is JSON, written to a temporary name and renamed over the old one,
 so a coordinator killed while writing leaves the previous minute's
-checkpoint intact.
+checkpoint intact.  It also keeps the writer's run epoch, so that a resumed
+coordinator's epoch is higher even where clocks disagree.
+
+A coordinator holds the run directory's lock file (:func:`locked`, a POSIX
+``fcntl`` lock, which also holds across NFS) while it plays: a second one on
+the same directory is refused in one line naming the holder.
 """
 
 from __future__ import annotations
 
+import datetime as dt
+import fcntl
 import json
 import os
+import socket
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from city.errors import DataError
+from city.errors import ConfigError, DataError
 from city.sim import FleetSim, FleetState
 from coordinator.metrics import Traffic
 
 CHECKPOINT = "checkpoint.json"
+LOCK = "lock"
 VERSION = 2
 
 
@@ -56,12 +68,13 @@ class Tally:
                      fallbacks=np.zeros(taxis, dtype=np.int64), rss=np.zeros(taxis))
 
 
-def save(run_dir: Path, config: dict, sim: FleetSim, tally: Tally) -> Path:
-    """Write the checkpoint of ``sim`` (after its last finished minute) atomically; its path."""
+def save(run_dir: Path, config: dict, sim: FleetSim, tally: Tally, epoch: int = 0) -> Path:
+    """Write the checkpoint of ``sim`` (after its last finished minute, by the coordinator of run epoch ``epoch``) atomically; its path."""
     s = sim.state
     doc = {
         "version": VERSION,
         "config": config,
+        "epoch": epoch,
         "t": int(s.t),
         "sim": {"pos": s.pos.tolist(), "tau": s.tau.tolist(), "dest": s.dest.tolist(), "picked_at": s.picked_at.tolist()},
         "tally": {"controls": tally.controls[: s.t].tolist(), "costs": tally.costs, "step_s": tally.step_s,
@@ -80,6 +93,55 @@ def save(run_dir: Path, config: dict, sim: FleetSim, tally: Tally) -> Path:
 def minutes_done(run_dir: Path) -> int:
     """How many minutes the checkpoint in ``run_dir`` holds (0 before the first): for a watcher of a run."""
     return int(_read(run_dir)["t"]) if (run_dir / CHECKPOINT).is_file() else 0
+
+
+def epoch_of(run_dir: Path) -> int:
+    """The run epoch of the coordinator that wrote the checkpoint in ``run_dir`` (0 if none is recorded)."""
+    epoch = _read(run_dir).get("epoch", 0)
+    if not isinstance(epoch, int) or isinstance(epoch, bool) or epoch < 0:
+        raise DataError(f"field 'epoch' is {epoch!r}, expected a non-negative integer", path=run_dir / CHECKPOINT)
+    return epoch
+
+
+@contextmanager
+def locked(run_dir: Path, run: str, epoch: int, wait_s: float = 0.0) -> Iterator[Path]:
+    """Hold ``run_dir``'s lock file while the block runs, waiting up to ``wait_s`` seconds for another holder to let go.
+
+    The lock file says who holds it (process, host, run, since when), for
+    the one-line message a refused coordinator prints.  The kernel releases
+    the lock when its holder exits, however it exits.
+    """
+    run_dir.mkdir(parents=True, exist_ok=True)
+    path = run_dir / LOCK
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except OSError:
+                if time.monotonic() >= deadline:
+                    waited = f" (waited {wait_s:g} s)" if wait_s else ""
+                    raise ConfigError(f"run directory {run_dir} is locked by {_holder(path)}{waited}: one coordinator plays "
+                                      f"from a run directory; wait for it to end, or choose another --run-dir") from None
+                time.sleep(0.2)
+        since = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "run": run, "epoch": epoch,
+                                  "since": since}).encode() + b"\n", 0)
+        yield path
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def _holder(path: Path) -> str:
+    """Who the lock file says holds it, in words."""
+    try:
+        doc = json.loads(path.read_text())
+        return f"the coordinator of run {doc['run']!r} (process {doc['pid']} on {doc['host']}, since {doc['since']})"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "another process"
 
 
 def read_config(run_dir: Path) -> dict:

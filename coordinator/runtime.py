@@ -21,6 +21,11 @@ every way out, checkpoints each minute to its run directory
 (:mod:`coordinator.checkpoint`, ``--resume``), and tells a partition from
 single failures and a hung agent from a live one (:mod:`coordinator.faults`).
 
+One coordinator drives a run (:mod:`coordinator.claim`): a coordinator that
+finds another's token alive refuses to start, or with ``takeover`` fences it
+by a higher run epoch; one that sees a higher epoch's token stops.  The run
+directory is locked (:func:`checkpoint.locked`) while a coordinator plays from it.
+
 A proposed control counts only if it is on its own agent's key, for the
 current minute, and one of that agent's candidate controls; anything else is
 dropped (the first of each kind logged) and the coordinator keeps waiting
@@ -34,6 +39,7 @@ import datetime as dt
 import os
 import sys
 import time
+from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -74,6 +80,7 @@ from city.fingerprint import city_sha256, code_version
 from city.forecast import Forecast
 from city.sim import FleetSim, Observation, Requests, decisions_hash
 from coordinator import checkpoint
+from coordinator.claim import TAKEOVER_WAIT_S, TakenOver, claim, epoch_time, taken_over
 from coordinator.faults import (
     ACK_WAIT_S,
     RESEND_S,
@@ -153,8 +160,13 @@ def log(message: str) -> None:
 class Coordinator:
     """Runs one episode over the bus; :meth:`run` returns its metrics and decisions."""
 
-    def __init__(self, config: FleetConfig, progress: bool = True, run_dir: str | Path | None = None, resume: bool = False) -> None:
+    def __init__(self, config: FleetConfig, progress: bool = True, run_dir: str | Path | None = None, resume: bool = False,
+                 takeover: bool = False) -> None:
         self.cfg = config
+        self.resume, self.takeover = resume, takeover
+        #: This coordinator's run epoch (set when it claims the run), and a higher one that took the run over.
+        self.epoch = 0
+        self.fenced_by: int | None = None
         self.keys = Keys(config.run)
         self.progress = progress
         scen, requests, start, context = config.instance()
@@ -181,11 +193,7 @@ class Coordinator:
         if resume:
             if self.run_dir is None:
                 raise ConfigError("resuming a run needs its run directory")
-            self.tally = checkpoint.restore(self.run_dir, self.sim, config.minutes)
-            if self.sim.state.t >= config.minutes:
-                raise ConfigError(f"{self.run_dir / checkpoint.CHECKPOINT}: run {config.run!r} finished "
-                                  f"(minute {config.minutes} of {config.minutes}); nothing to resume")
-            log(f"resuming run {config.run!r} at minute {self.sim.state.t} from {self.run_dir / checkpoint.CHECKPOINT}")
+            self._restore()  # a bad or finished checkpoint is one line before the bus; read again once the run directory is locked
         #: Whether every agent has joined once: later token changes are departures and returns.
         self.running = False
         self.bounds = Bounds(taxis=config.taxis, nodes=self.city.n_nodes, sectors=self.city.n_sectors, minutes=config.minutes)
@@ -196,18 +204,29 @@ class Coordinator:
         self.waiting: set[int] = set()
         self.arrived: dict[int, Control] = {}
 
+    def _restore(self) -> None:
+        assert self.run_dir is not None
+        self.tally = checkpoint.restore(self.run_dir, self.sim, self.cfg.minutes)
+        if self.sim.state.t >= self.cfg.minutes:
+            raise ConfigError(f"{self.run_dir / checkpoint.CHECKPOINT}: run {self.cfg.run!r} finished "
+                              f"(minute {self.cfg.minutes} of {self.cfg.minutes}); nothing to resume")
+
     # ------------------------------------------------------------------ inbox
     def _handle(self, item: tuple[str, str, object], want: set[tuple[int, int]] | None = None) -> Control | None:
         """Serve queries, track liveliness, and return the control if this item is one of ``want``'s (t, agent).
 
         Anything wrong with the item, or raised while handling it, drops it.
+        A higher coordinator's token raises :class:`TakenOver`.
         """
         tag, key, payload = item
         try:
-            return self._handle_one(tag, key, payload, want)
+            out = self._handle_one(tag, key, payload, want)
         except Exception as exc:  # one bad message never ends the run
             self.rejected.exception(tag, key, exc)
-            return None
+            out = None
+        if self.fenced_by is not None:
+            raise taken_over(self.cfg.run, self.fenced_by, self.epoch, int(self.sim.state.t))
+        return out
 
     def _handle_one(self, tag: str, key: str, payload: object, want: set[tuple[int, int]] | None) -> Control | None:
         current = None if self.obs is None else int(self.obs.t)
@@ -216,6 +235,10 @@ class Coordinator:
             if agent is None or not 0 <= agent < self.cfg.taxis:
                 raise WireError(f"{key}: a liveliness token of no agent of this run's {self.cfg.taxis}")
             self.health.token(agent, bool(payload), self.running)
+        elif tag == "coordinator":
+            epoch = Keys.agent_of(key)
+            if payload and epoch is not None and epoch > self.epoch:
+                self.fenced_by = epoch
         elif tag == "ack":
             self.tally.traffic.received(payload)  # type: ignore[arg-type]
             msg = check_ack(decode(payload, Ack, key), key, self.bounds)  # type: ignore[arg-type]
@@ -238,8 +261,12 @@ class Coordinator:
             c = check_control(decode(payload, Control, key), key, self.bounds)  # type: ignore[arg-type]
             if c.by != "agent":
                 raise WireError(f"{key}: a proposed control must say by='agent', not {c.by!r}")
-            if self.obs is not None and c.t == self.obs.t:
-                check_choice(c, key, candidate_controls(self.city, self.obs, c.agent))
+            now = self.obs is not None and c.t == self.obs.t
+            if now:
+                check_choice(c, key, candidate_controls(self.city, self.obs, c.agent))  # type: ignore[union-attr]
+            if c.epoch != self.epoch:
+                raise WireError(f"{key}: a control for run epoch {c.epoch}, this coordinator's is {self.epoch}")
+            if now:
                 self.health.ack(c.agent, c.t, current)
             if want is not None and (c.t, c.agent) in want:
                 return c
@@ -262,7 +289,7 @@ class Coordinator:
 
     def full_state(self) -> bytes:
         obs = self.sim.observe()
-        return state_message(obs, None, base_controls(self.city, self.rollout, obs)).encode()
+        return state_message(obs, None, base_controls(self.city, self.rollout, obs), self.epoch).encode()
 
     def _snapshot(self) -> Snapshot:
         """The full state (with its base controls) and the hour's forecast: all a (re)joining agent needs (a turn brings its commitments)."""
@@ -271,8 +298,16 @@ class Coordinator:
     # ------------------------------------------------------------------- run
     def run(self, bus: SessionArgs) -> dict:
         """Play the episode; ``Stop`` goes out on every way out (done, an error, SIGTERM, Ctrl-C), with the reason."""
-        with open_session(bus) as session:
+        with open_session(bus) as session, ExitStack() as stack:
             inbox = Inbox()
+            resumed = checkpoint.epoch_of(self.run_dir) if self.resume and self.run_dir is not None else 0
+            claimed = claim(session, self.keys, stack, resume=self.resume, takeover=self.takeover, resumed_epoch=resumed)
+            self.epoch, fenced = claimed.epoch, claimed.fenced
+            if self.run_dir is not None:  # after a takeover, wait for the fenced coordinator to let go of it
+                stack.enter_context(checkpoint.locked(self.run_dir, self.cfg.run, self.epoch, TAKEOVER_WAIT_S if fenced else 0.0))
+            if self.resume:
+                self._restore()  # what the run directory holds now: a fenced coordinator may have played on
+                log(f"resuming run {self.cfg.run!r} at minute {self.sim.state.t} from {self.run_dir / checkpoint.CHECKPOINT}")
             pub_stop = publisher(session, self.keys.stop)
             decls = [
                 inbox.serve(session, self.keys.spec, "spec"),
@@ -281,13 +316,20 @@ class Coordinator:
                 inbox.subscribe(session, self.keys.all_controls, "control"),
                 inbox.subscribe(session, self.keys.all_acks, "ack"),
                 inbox.watch_liveliness(session, self.keys.all_alive, "alive"),
+                inbox.watch_liveliness(session, self.keys.all_coordinators, "coordinator"),
             ]
-            token = session.liveliness().declare_token(self.keys.coordinator)  # once the snapshot it stands for is served
-            reason = "the coordinator failed"
+            if not fenced:  # a takeover's token is out already: it is the fence
+                token = session.liveliness().declare_token(self.keys.coordinator(self.epoch))  # once the snapshot it stands for is served
+                stack.callback(token.undeclare)
+            log(f"run {self.cfg.run!r}: this coordinator is run epoch {self.epoch} (since {epoch_time(self.epoch)})")
+            reason: str | None = "the coordinator failed"
             try:
                 result = self._run(session, inbox)
                 reason = "done"
                 return result
+            except TakenOver:
+                reason = None  # the run goes on under the new coordinator: no stop
+                raise
             except SystemExit as exc:
                 reason = f"the coordinator was stopped (exit {exc.code})"
                 raise
@@ -298,12 +340,13 @@ class Coordinator:
                 reason = f"the coordinator failed: {exc}"[:300]
                 raise
             finally:
-                pub_stop.put(Stop(t=self.cfg.minutes if reason == "done" else int(self.sim.state.t), reason=reason).encode())
-                if reason != "done":
+                if reason is not None:
+                    pub_stop.put(Stop(t=self.cfg.minutes if reason == "done" else int(self.sim.state.t), epoch=self.epoch,
+                                      reason=reason).encode())
+                if reason not in ("done", None):
                     log(f"published stop at minute {self.sim.state.t}: {reason}")
                 for d in decls:
                     d.undeclare()
-                token.undeclare()
 
     def _wait_for_agents(self, inbox: Inbox) -> None:
         deadline = time.monotonic() + self.cfg.join_timeout_s
@@ -346,7 +389,7 @@ class Coordinator:
                 self.forecast_msg = self._forecast(session, inbox, t // 60)
                 self._hold_forecast(pub_forecast, t // 60)
             base = base_controls(self.city, self.rollout, obs)
-            pub_state.put(state_message(obs, previous, base).encode())
+            pub_state.put(state_message(obs, previous, base, self.epoch).encode())
             previous = np.asarray(obs.req_index)
             u = base.copy()
             waves = plan_waves(self.city, obs, self.rollout.prune)
@@ -355,7 +398,7 @@ class Coordinator:
             costs.append(self.sim.step(u))
             step_s.append(time.perf_counter() - t0)
             if self.run_dir is not None:
-                checkpoint.save(self.run_dir, asdict(cfg), self.sim, tally)
+                checkpoint.save(self.run_dir, asdict(cfg), self.sim, tally, self.epoch)
             if self.progress:
                 free = int((obs.tau == 0).sum())
                 log(f"minute {t + 1}/{cfg.minutes}: {free} free {'taxi' if free == 1 else 'taxis'} took turns, "
@@ -496,7 +539,7 @@ class Coordinator:
             if c is None:
                 tally.fallbacks[agent] += 1
                 tally.fallen.append([t, agent])
-                c = Control(t=t, agent=agent, control=int(base[agent]), by="base")
+                c = Control(t=t, agent=agent, control=int(base[agent]), epoch=self.epoch, by="base")
             else:
                 u[agent] = c.control
                 tally.planned[agent] += 1
@@ -530,7 +573,7 @@ class Coordinator:
                     if a not in health.alive:
                         commit(a, None)
                         continue
-                    turns[a] = Turn(t=t, agent=a, deps=depends[a], controls=u[depends[a]]).encode()
+                    turns[a] = Turn(t=t, agent=a, deps=depends[a], controls=u[depends[a]], epoch=self.epoch).encode()
                     pubs[a].put(turns[a])
                     if a in health.suspect:
                         commit(a, None)
@@ -606,11 +649,14 @@ class Coordinator:
 
 
 def coordinator_main(config: FleetConfig, bus: SessionArgs, result_path: str | None = None, run_dir: str | None = None,
-                     resume: bool = False) -> dict:
-    """Run the coordinator (checkpointing to ``run_dir``, resuming from it); with ``result_path``, write the result there as JSON."""
+                     resume: bool = False, takeover: bool = False) -> dict:
+    """Run the coordinator (checkpointing to ``run_dir``, resuming from it); with ``result_path``, write the result there as JSON.
+
+    ``takeover`` fences a live coordinator of the same run instead of refusing to start.
+    """
     import json
 
-    result = Coordinator(config, run_dir=run_dir, resume=resume).run(bus)
+    result = Coordinator(config, run_dir=run_dir, resume=resume, takeover=takeover).run(bus)
     if result_path is not None:
         Path(result_path).write_text(json.dumps(result, indent=1))
     return result

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -60,8 +62,9 @@ def fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  # 
 
 def _checkpoint_args(p, verb: str) -> None:  # noqa: ANN001
     p.add_argument("--run-dir", default=None, metavar="DIR",
-                   help="checkpoint the run here after each minute, so that `--resume DIR` can continue it "
-                        "(default: runs/<run> in surge's cache, $SURGE_CACHE or ~/.cache/surge)")
+                   help="checkpoint the run here after each minute, so that `--resume DIR` can continue it; one coordinator "
+                        "at a time holds it (a lock file) (default: a new runs/<run>-<UTC time>-<pid> in surge's cache, "
+                        "$SURGE_CACHE or ~/.cache/surge)")
     extra = "; a new router and new agents start" if verb == "fleet" else ""
     p.add_argument("--resume", default=None, metavar="RUN_DIR",
                    help=f"continue the run checkpointed in RUN_DIR (its settings come from the checkpoint; the bus flags apply{extra})")
@@ -119,8 +122,13 @@ def _run_dir(args) -> tuple[FleetConfig, str]:  # noqa: ANN001
         from city.scenario import cache_dir
 
         cfg = fleet_config(args)
-        run_dir = args.run_dir or str(cache_dir() / "runs" / cfg.run)
+        run_dir = args.run_dir or str(cache_dir() / "runs" / default_run_dir_name(cfg.run))
     return cfg, run_dir
+
+
+def default_run_dir_name(run: str) -> str:
+    """A run directory's name unique to this run, not shared by every run of the same name: ``<run>-<UTC time>-<pid>``."""
+    return f"{run}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}-{os.getpid()}"
 
 
 def _say_checkpoint(run_dir: str, verb: str) -> None:
@@ -191,7 +199,7 @@ def cmd_coordinator(args) -> int:  # noqa: ANN001
     cfg, run_dir = _run_dir(args)
     bus = session_args(args, identity="coordinator")
     _say_checkpoint(run_dir, "coordinator")
-    result = coordinator_main(cfg, bus, run_dir=run_dir, resume=args.resume is not None)
+    result = coordinator_main(cfg, bus, run_dir=run_dir, resume=args.resume is not None, takeover=args.takeover)
     _print_result(result, args.json)
     return 0
 
@@ -322,6 +330,9 @@ def add_parser(sub) -> None:  # noqa: ANN001
     add_session_args(c)
     fleet_args(c, taxis=8, minutes=60, samples=None)
     _checkpoint_args(c, "coordinator")
+    c.add_argument("--takeover", action="store_true",
+                   help="if the run has a live coordinator (one whose host is unreachable rather than dead), fence it and take "
+                        "the run over: the agents drop its turns from then on (without this, a second coordinator is refused)")
     c.set_defaults(func=cmd_coordinator)
 
     a = sub.add_parser("agents", help="start agent processes (one per taxi) that join a run over zenoh")

@@ -41,11 +41,11 @@ def try_open(conf: zenoh.Config):  # noqa: ANN201
 
 
 #: The wire version of docs/PROTOCOL.md: what an outsider writes from the document.
-WIRE = 2
+WIRE = 3
 
 
 def control(t: int, agent: int, value: int, **extra) -> bytes:
-    return msgpack.packb({"v": WIRE, "kind": "control", "t": t, "agent": agent, "control": value, "by": "agent",
+    return msgpack.packb({"v": WIRE, "kind": "control", "t": t, "agent": agent, "control": value, "epoch": 0, "by": "agent",
                           "plan_s": 0.0, "rss_mb": 0.0, **extra}, use_bin_type=True)
 
 
@@ -70,7 +70,7 @@ def probe(a: dict) -> dict:
     co, t0, t3, t4, pr = s["coordinator"], s["taxi-0"], s["taxi-3"], s["taxi-4"], s["predictor"]
     keep = [co.declare_subscriber(f"{root}/control/*", watch("coordinator")),
             co.declare_subscriber(f"{root}/ack/*", watch("coordinator")),
-            t0.liveliness().declare_subscriber(f"{root}/coordinator", lambda x: seen.put(("taxi-0", str(x.key_expr), "token")),
+            t0.liveliness().declare_subscriber(f"{root}/coordinator/*", lambda x: seen.put(("taxi-0", str(x.key_expr), "token")),
                                                history=True),
             co.liveliness().declare_subscriber(f"{root}/alive/*", lambda x: seen.put(("coordinator", str(x.key_expr), "token")),
                                                history=True),
@@ -82,7 +82,7 @@ def probe(a: dict) -> dict:
     keep += [t3.declare_queryable(f"{root}/{k}", answer("forged")) for k in ("spec", "snapshot", "predictor", "forecast/0")]
     keep.append(co.declare_queryable(f"{root}/forecast/*", answer("coordinator")))
     keep += [t3.liveliness().declare_token(f"{root}/alive/4"), t3.liveliness().declare_token(f"{root}/alive/3"),
-             t3.liveliness().declare_token(f"{root}/coordinator")]
+             t3.liveliness().declare_token(f"{root}/coordinator/9")]
     time.sleep(1.0)
     for k in ("control/4", "ack/4", "committed/0", "committed/3", "state", "forecast/0", "dropoffs", "turn/0", "turn/4", "stop"):
         t3.put(f"{root}/{k}", f"forged by taxi-3 on {k}".encode())
@@ -106,11 +106,11 @@ def probe(a: dict) -> dict:
     while not seen.empty():
         got.append(seen.get())
     out["seen"] = got
-    real = co.liveliness().declare_token(f"{root}/coordinator")  # the observer hears the coordinator's own token
+    real = co.liveliness().declare_token(f"{root}/coordinator/1")  # the observer hears the coordinator's own token
     deadline = time.monotonic() + 5
     while time.monotonic() < deadline and "coordinator token" not in out:
         try:
-            if seen.get(timeout=0.2)[1].endswith("/coordinator"):
+            if seen.get(timeout=0.2)[1].endswith("/coordinator/1"):
                 out["coordinator token"] = "seen"
         except queue.Empty:
             pass
@@ -144,7 +144,7 @@ def junk(rng: random.Random, depth: int = 0):  # noqa: ANN201
     return {rng.choice(keys): junk(rng, depth + 1) for _ in range(rng.randrange(0, 6))}
 
 
-def fuzz_payload(rng: random.Random, agent: int, now: int) -> bytes:
+def fuzz_payload(rng: random.Random, agent: int, now: int, epoch: int) -> bytes:
     """Random structure, or a well-formed control whose values are out of range for the receiver."""
     kind = rng.randrange(4)
     if kind == 0:
@@ -152,11 +152,12 @@ def fuzz_payload(rng: random.Random, agent: int, now: int) -> bytes:
     if kind == 1:
         return msgpack.packb(junk(rng), use_bin_type=True)
     if kind == 2:  # well-formed, the right minute and agent, a control that no taxi has
-        return control(now, agent, rng.choice([-2**40, -5, -2, 2**31 - 1, 2**40, 10**6]))
+        return control(now, agent, rng.choice([-2**40, -5, -2, 2**31 - 1, 2**40, 10**6]), epoch=epoch)
     fields = {"t": rng.choice([now, -1, 10**9, 2**40]), "agent": rng.choice([agent, agent + 1, -1, 2**31, 99]),
               "control": rng.choice([-7, 2**40, 10**6]), "by": rng.choice(["agent", "base", "x"]),
-              "plan_s": rng.choice([0.0, -1.0, math.nan, math.inf]), "rss_mb": rng.choice([0.0, 1e300, -3.0])}
-    return msgpack.packb({"v": rng.choice([1, 1, 1, 2]), "kind": rng.choice(["control", "control", "turn"]), **fields},
+              "plan_s": rng.choice([0.0, -1.0, math.nan, math.inf]), "rss_mb": rng.choice([0.0, 1e300, -3.0]),
+              "epoch": rng.choice([epoch, epoch, epoch - 1, -1, 2**64 - 1])}
+    return msgpack.packb({"v": rng.choice([1, 2, 2, 3]), "kind": rng.choice(["control", "control", "turn"]), **fields},
                          use_bin_type=True)
 
 
@@ -179,14 +180,17 @@ def attack(a: dict) -> dict:
     pubs = {n: sessions[n].declare_publisher(f"{root}/control/{int(n.split('-')[1])}", congestion_control=block) for n in a["fuzzers"]}
     forge = {n: sessions[n].declare_publisher(f"{root}/control/{victim}", congestion_control=block) for n in a["attackers"]}
     now, stay, stopped, answered = 0, 0, False, set()
+    # the run epoch, as a taxi learns it: from the coordinator's token (and then from every state)
+    tokens = sessions[a["fuzzers"][0]].liveliness().get(f"{root}/coordinator/*", timeout=5.0)
+    epoch = max([int(str(r.ok.key_expr).rsplit("/", 1)[1]) for r in tokens if r.ok is not None], default=0)
 
     def forge_all(t: int) -> None:
         for n, p in forge.items():
-            p.put(control(t, victim, stay))
+            p.put(control(t, victim, stay, epoch=epoch))
             out["forged"][n] += 1
 
     def drain() -> None:
-        nonlocal now, stay, stopped
+        nonlocal now, stay, epoch, stopped
         while True:
             try:
                 who, k, payload = inbox.get_nowait()
@@ -197,12 +201,12 @@ def attack(a: dict) -> dict:
                 continue
             msg = msgpack.unpackb(payload)
             if k.endswith("/state"):
-                now = msg["t"]
+                now, epoch = msg["t"], msg["epoch"]
                 stay = int.from_bytes(msg["pos"][4 * victim: 4 * victim + 4], "little", signed=True)
                 if now not in answered:  # each attacker hears each state: answer a minute once
                     answered.add(now)
                     for name, pub in pubs.items():  # on time whatever the flood's backlog: a control no taxi has, this minute
-                        pub.put(control(now, int(name.split("-")[1]), 10**6))
+                        pub.put(control(now, int(name.split("-")[1]), 10**6, epoch=epoch))
                         out["fuzz_controls"] += 1
             elif "/turn/" in k:
                 out["turns_seen"][who] += 1
@@ -218,10 +222,10 @@ def attack(a: dict) -> dict:
             for _ in range(25):
                 roll = rng.random()
                 if roll < 0.85:
-                    pubs[name].put(fuzz_payload(rng, me, now))
+                    pubs[name].put(fuzz_payload(rng, me, now, epoch))
                     out["fuzz_controls"] += 1
                 elif roll < 0.95:
-                    s.get(f"{root}/{rng.choice(['spec', 'snapshot'])}", payload=fuzz_payload(rng, me, now), timeout=1.0)
+                    s.get(f"{root}/{rng.choice(['spec', 'snapshot'])}", payload=fuzz_payload(rng, me, now, epoch), timeout=1.0)
                 else:
                     s.liveliness().declare_token(f"{root}/alive/{me}").undeclare()
                 out["fuzzed"] += 1

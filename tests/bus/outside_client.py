@@ -15,7 +15,7 @@ import time
 import msgpack
 import zenoh
 
-WIRE = 2
+WIRE = 3
 ENCODING = "application/msgpack"
 
 

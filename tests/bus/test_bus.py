@@ -58,9 +58,9 @@ def test_every_message_round_trips_exactly() -> None:
     assert back.nodes.dtype == np.int32 and np.array_equal(back.nodes, piece.nodes) and np.array_equal(back.beta, piece.beta)
     drops = decode(Dropoffs(hour=1, delta=rng.random(40)).encode(), Dropoffs)
     assert drops.delta.shape == (40,) and drops.hour == 1
-    for msg in (Control(t=3, agent=2, control=-1, by="base", plan_s=0.25), Stop(t=9)):
+    for msg in (Control(t=3, agent=2, control=-1, epoch=0, by="base", plan_s=0.25), Stop(t=9, epoch=0)):
         assert decode(msg.encode(), type(msg)) == msg
-    turn = decode(Turn(t=3, agent=2, deps=np.array([0, 1]), controls=np.array([-1, 7])).encode(), Turn)
+    turn = decode(Turn(t=3, agent=2, deps=np.array([0, 1]), controls=np.array([-1, 7]), epoch=0).encode(), Turn)
     assert (turn.t, turn.agent, turn.deps.tolist(), turn.controls.tolist()) == (3, 2, [0, 1], [-1, 7])
     snap = Snapshot(state=b"abc", forecast=fc.encode())
     assert decode(snap.encode(), (Turn, Snapshot)) == snap
@@ -77,6 +77,8 @@ def test_every_message_round_trips_exactly() -> None:
         (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": 1}), "turn has no field 'agent'"),
         (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": "1", "agent": 0}), "field 't' is str, expected int"),
         (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": True, "agent": 0}), "field 't' is bool, expected int"),
+        (msgpack.packb({"v": 2, "kind": "turn", "t": 1, "agent": 0, "deps": b"", "controls": b""}), "wire version 2, expected 3"),
+        (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": 1, "agent": 0, "deps": b"", "controls": b""}), "turn has no field 'epoch'"),
     ],
 )
 def test_bad_messages_name_the_key_and_field(payload: bytes, message: str) -> None:
@@ -87,7 +89,7 @@ def test_bad_messages_name_the_key_and_field(payload: bytes, message: str) -> No
 
 def test_bad_arrays_are_caught() -> None:
     good = State(t=0, full=True, pos=[1, 2], tau=[0, 0], dest=[-1, -1], new_index=[], new_pickup=[], new_dropoff=[],
-                 new_entry=[], picked=[], outstanding=0, base=[1, -1])
+                 new_entry=[], picked=[], outstanding=0, base=[1, -1], epoch=0)
     raw = msgpack.unpackb(good.encode())
     raw["pos"] = b"\x00\x00\x00"
     with pytest.raises(WireError, match="field 'pos': expected int32 bytes"):

@@ -120,7 +120,7 @@ def test_taxi_3s_certificate_can_do_only_what_taxi_3_does(secured: dict) -> None
     assert ("taxi-0", "surge/acl/state", "the coordinator's state") in seen
     # ... and nothing else: no control/4, ack/4, committed, state, forecast, turn or stop from taxi 3, no alive/4
     # and no coordinator token (taxi-0 watches for one), and no control/3 or ack/3 from any other identity
-    assert [s for s in seen if "forged" in s[2] or s[1].endswith(("alive/4", "/coordinator"))] == []
+    assert [s for s in seen if "forged" in s[2] or s[1].endswith(("alive/4", "/coordinator/9"))] == []
     assert len(seen) == 4 and out["coordinator token"] == "seen"
     assert out["answers"] == {"taxi-0 spec": ["coordinator"], "taxi-0 snapshot": ["coordinator"],
                               "coordinator predictor": ["predictor"], "taxi-4 spec": ["coordinator"],
@@ -186,7 +186,7 @@ def test_forged_stays_and_a_fuzz_flood_change_nothing(secured: dict, tmp_path: P
     on_controls = sum(n for kind, n in result["rejected_messages"].items() if kind.startswith("control:"))
     assert on_controls + result["stale_messages"] == attack["fuzz_controls"]
     log = "".join(err)
-    assert "ignored: surge/attack/control/" in log and "not one of its controls" in log
+    assert "ignored: surge/attack/control/" in log and "not one of its controls" in log, [x for x in err if "ignored" in x]
     assert log.count("ignored:") <= len(result["rejected_messages"])  # at most one line per kind, not one per message
     assert os.path.getsize(out) > 0
 
@@ -251,7 +251,7 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
             sent.append(decode(payload, Control))
 
     def turn(t: int, deps: list[int], controls: list[int]) -> bytes:
-        return Turn(t=t, agent=1, deps=np.array(deps, np.int32), controls=np.array(controls, np.int32)).encode()
+        return Turn(t=t, agent=1, deps=np.array(deps, np.int32), controls=np.array(controls, np.int32), epoch=0).encode()
 
     inbox = Inbox()
     for item in [
@@ -263,13 +263,13 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
         ("turn", k.turn(1), turn(0, [2], [ok])),  # agent 2 is no predecessor of agent 1
         ("turn", k.turn(1), turn(7, [], [])),  # not a minute of the episode
         ("turn", k.turn(1), turn(2, [], [])),  # ahead of its state: held, then replaced by the turn of minute 0
-        ("stop", k.stop, Stop(t=1).encode()),  # not the run's end: the agent stays
+        ("stop", k.stop, Stop(t=1, epoch=0).encode()),  # not the run's end: the agent stays
         ("forecast", k.forecast(0), b"\x93\x01\x02"),
         *[("forecast", k.forecast(s), sector_message(fc, agent.city, 0, s).encode()) for s in range(S)],
         ("dropoffs", k.dropoffs, Dropoffs(hour=0, delta=fc.delta).encode()),
         ("turn", k.turn(1), turn(0, [0], [not_a_move])),  # checked when the agent plans: dropped, no control sent
         ("turn", k.turn(1), turn(0, [0], [ok])),
-        ("stop", k.stop, Stop(t=4).encode()),
+        ("stop", k.stop, Stop(t=4, epoch=0).encode()),
     ]:
         inbox.put(*item)
     agent._loop(None, inbox, Out())
@@ -297,11 +297,11 @@ def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> 
 
     ok = int(candidate_controls(coord.city, obs, 1)[0])
     want = {(0, 1)}
-    for payload in (Control(t=0, agent=1, control=2**40).encode(), Control(t=0, agent=1, control=-5).encode(),
-                    Control(t=0, agent=1, control=ok, by="base").encode(), Control(t=0, agent=1, control=ok, plan_s=float("nan")).encode(),
+    for payload in (Control(t=0, agent=1, control=2**40, epoch=0).encode(), Control(t=0, agent=1, control=-5, epoch=0).encode(),
+                    Control(t=0, agent=1, control=ok, epoch=0, by="base").encode(), Control(t=0, agent=1, control=ok, epoch=0, plan_s=float("nan")).encode(),
                     b"junk"):
         assert coord._handle(("control", k.control(1), payload), want) is None
-    assert coord._handle(("control", k.control(2), Control(t=0, agent=1, control=ok).encode()), want) is None
+    assert coord._handle(("control", k.control(2), Control(t=0, agent=1, control=ok, epoch=0).encode()), want) is None
     assert coord._handle(("alive", k.alive(7), True), want) is None and coord.health.alive == set()
 
     class Gone:
@@ -312,7 +312,7 @@ def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> 
             pass
 
     assert coord._handle(("snapshot", k.snapshot, Gone()), want) is None
-    got = coord._handle(("control", k.control(1), Control(t=0, agent=1, control=ok).encode()), want)
+    got = coord._handle(("control", k.control(1), Control(t=0, agent=1, control=ok, epoch=0).encode()), want)
     assert got is not None and got.control == ok
     kinds = coord.rejected.counts
     assert sum(kinds.values()) == 8 and any("RuntimeError" in kind for kind in kinds)
@@ -345,3 +345,57 @@ def test_insecure_says_so_in_one_line(tmp_path: Path) -> None:
     conf = json.loads(proc.stdout)
     assert conf["listen"]["endpoints"] == ["tls/127.0.0.1:7447"] and conf["transport"]["link"]["protocols"] == ["tls"]
     assert {k for r in conf["access_control"]["rules"] for k in r["key_exprs"]} >= {"surge/r1/control/1", "surge/r1/state"}
+
+
+def test_an_agent_follows_the_highest_run_epoch_and_drops_a_fenced_coordinators_messages(capsys: pytest.CaptureFixture) -> None:
+    """Tokens of epochs 5 and then 9: the state, turn and stop of epoch 5 are dropped, and the turn of epoch 9 is answered
+    with epoch 9; epoch 5's token going does not count as the coordinator gone."""
+    import numpy as np
+
+    from agents.rollout import candidate_controls
+    from bus.delta import state_message
+    from bus.forecast_messages import sector_message
+    from bus.session import Inbox
+    from bus.wire import Control, Dropoffs, Stop, Turn, decode
+    from city.forecast import Forecast
+    from city.sim import Observation
+
+    agent, _ = _agent(run="e")
+    k, n, S = agent.keys, agent.city.n_nodes, agent.city.n_sectors
+    obs = Observation(t=0, pos=np.array([0, 5, 9], np.int32), tau=np.zeros(3, np.int32), dest=np.full(3, -1, np.int32),
+                      req_index=np.zeros(0, np.int64), req_pickup=np.zeros(0, np.int32), req_dropoff=np.zeros(0, np.int32),
+                      req_entry=np.zeros(0, np.int32))
+    base = np.array([0, 5, 9], dtype=np.int32)
+    fc = Forecast(eta=np.full(S, 0.5), rho=np.ones(n), delta=np.ones(n), beta=np.full((S, S), 1.0 / S))
+    ok = int(candidate_controls(agent.city, obs, 0)[-1])
+    sent = []
+
+    class Out:
+        def put(self, payload: bytes) -> None:
+            sent.append(decode(payload, Control))
+
+    def turn(epoch: int) -> bytes:
+        return Turn(t=0, agent=1, deps=np.array([0], np.int32), controls=np.array([ok], np.int32), epoch=epoch).encode()
+
+    inbox = Inbox()
+    for item in [
+        ("coordinator", k.coordinator(5), True),
+        ("coordinator", k.coordinator(9), True),  # a takeover
+        ("state", k.state, state_message(obs, None, base, 5).encode()),
+        ("stop", k.stop, Stop(t=1, epoch=5, reason="the coordinator was stopped (exit 143)").encode()),
+        ("state", k.state, state_message(obs, None, base, 9).encode()),
+        *[("forecast", k.forecast(s), sector_message(fc, agent.city, 0, s).encode()) for s in range(S)],
+        ("dropoffs", k.dropoffs, Dropoffs(hour=0, delta=fc.delta).encode()),
+        ("turn", k.turn(1), turn(5)),
+        ("turn", k.turn(1), turn(9)),
+        ("coordinator", k.coordinator(5), False),  # the fenced coordinator leaves
+        ("stop", k.stop, Stop(t=4, epoch=9).encode()),
+    ]:
+        inbox.put(*item)
+    agent._loop(None, inbox, Out())
+    err = capsys.readouterr().err
+    assert "the coordinator of run epoch 9 took the run over from epoch 5" in err
+    for what in ("state", "stop", "turn"):
+        assert f"a {what} of run epoch 5, whose coordinator was taken over by epoch 9" in err, what
+    assert [(c.t, c.agent, c.epoch) for c in sent] == [(0, 1, 9)] and agent.decisions == 1
+    assert agent.epoch == 9 and agent.coordinator_gone is None

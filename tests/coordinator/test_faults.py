@@ -482,7 +482,7 @@ def test_a_turn_waits_for_its_live_dependencies_only_and_resends_unanswered_turn
     base = np.array([7, 8, 9], dtype=np.int32)
     ok = int(candidate_controls(coord.city, coord.obs, 1)[0])
     inbox = Inbox()
-    inbox.put("control", coord.keys.control(1), Control(t=0, agent=1, control=ok).encode())
+    inbox.put("control", coord.keys.control(1), Control(t=0, agent=1, control=ok, epoch=0).encode())
     u = base.copy()
     out = coord._turns(inbox, turns, commits, 0, waves, base, u)
     assert [(k, m.agent) for k, m in events if k == "turn"] == [("turn", 0), ("turn", 1), ("turn", 2), ("turn", 0)]  # 0 again after RESEND_S
@@ -505,7 +505,7 @@ def test_a_turn_goes_out_once_its_dependencies_commit_without_waiting_for_their_
     pick = {a: int(candidate_controls(coord.city, coord.obs, a)[-1]) for a in range(3)}
     inbox = Inbox()
     for a in range(3):
-        inbox.put("control", coord.keys.control(a), Control(t=0, agent=a, control=pick[a]).encode())
+        inbox.put("control", coord.keys.control(a), Control(t=0, agent=a, control=pick[a], epoch=0).encode())
     u = np.full(3, -5, dtype=np.int32)
     out = coord._turns(inbox, turns, commits, 0, waves, u.copy(), u)
     assert [(k, m.agent) for k, m in events] == [("turn", 0), ("turn", 2), ("commit", 0), ("turn", 1), ("commit", 1), ("commit", 2)]
@@ -513,3 +513,57 @@ def test_a_turn_goes_out_once_its_dependencies_commit_without_waiting_for_their_
     assert turn1.deps.tolist() == [0] and turn1.controls.tolist() == [pick[0]]
     assert u.tolist() == [pick[0], pick[1], pick[2]] and coord.tally.fallbacks.sum() == 0
     assert [w["agents"] for w in out] == [[0, 2], [1]] and all(w["seconds"] >= 0 for w in out)
+
+
+# ------------------------------------------------------------ one coordinator per run
+def test_a_second_coordinator_is_refused_and_a_run_directory_is_locked(bus: Bus) -> None:
+    """While a coordinator of run 'solo' is alive, a second one is refused, naming the run and since when; its default run
+    directory is its own; and a coordinator of another run on the first one's run directory is refused by the lock."""
+    first = _coordinator(bus, "solo", minutes=5, deadline=30, minute_s=0)
+    flags = [*bus.flags, "--taxis", "3", "--minutes", "5", "--forecast", "true-rate", "--samples", "40"]
+    try:
+        first.wait_for("this coordinator is run epoch")
+        run_dir = first.wait_for("checkpointing each minute to ").split(" to ", 1)[1].split(";")[0]
+        assert Path(run_dir).parent.name == "runs" and Path(run_dir).name.startswith("solo-")
+        second = subprocess.run([*CLI, "coordinator", "--run", "solo", *flags], capture_output=True, text=True, timeout=300)
+        errors = [line for line in second.stderr.splitlines() if "error" in line]
+        assert second.returncode == 2 and len(errors) == 1, second.stderr
+        assert "run 'solo' has a live coordinator (run epoch " in errors[0] and ", since 20" in errors[0]
+        assert "refusing to start a second one" in errors[0] and "--takeover" in errors[0]
+        assert f"checkpointing each minute to {run_dir};" not in second.stderr  # a run directory of its own
+        third = subprocess.run([*CLI, "coordinator", "--run", "other", "--run-dir", run_dir, *flags], capture_output=True, text=True,
+                               timeout=300)
+        errors = [line for line in third.stderr.splitlines() if "error" in line]
+        assert third.returncode == 2 and len(errors) == 1, third.stderr
+        assert f"run directory {run_dir} is locked by the coordinator of run 'solo' (process {first.proc.pid} on " in errors[0]
+        assert first.proc.poll() is None
+    finally:
+        first.kill()
+
+
+def test_takeover_fences_the_first_coordinator_and_keeps_the_uninterrupted_decisions(bus: Bus, tmp_path: Path) -> None:
+    """A second coordinator resumes a live run with --takeover: the first stops without another checkpoint or stop, the
+    agents follow the new run epoch, and the decisions are those of the in-process run."""
+    from coordinator.fleet import in_process, resumed_config
+
+    run, run_dir, minutes, out = "fence", tmp_path / "run", 12, tmp_path / "second.json"
+    first = _coordinator(bus, run, "--run-dir", str(run_dir), minutes=minutes, deadline=60, minute_s=3.0)  # room for a second to start
+    agents = [bus.agent(i, run, grace=90) for i in range(3)]
+    second = None
+    try:
+        first.wait_for(f"minute 1/{minutes}")
+        second = Logged([*CLI, "coordinator", *bus.flags, "--resume", str(run_dir), "--takeover", "--json", str(out)])
+        assert first.finish(180) == 2, first.text + "\n---\n" + second.text
+        assert second.finish(300) == 0, second.text
+        assert [a.finish(60) for a in agents] == [0, 0, 0], "\n".join(a.text for a in agents)
+    finally:
+        for p in (first, second, *agents):
+            if p is not None:
+                p.kill()
+    assert "taking run 'fence' over from the coordinator of run epoch" in second.text
+    assert "was taken over by the coordinator of run epoch" in first.text and "published stop" not in first.text
+    assert all("took the run over from epoch" in a.text for a in agents)
+    result = json.loads(out.read_text())
+    assert 1 <= result["resumed_at_minute"] < minutes and len(result["controls"]) == minutes and result["fallbacks"] == 0
+    ref = in_process(resumed_config(str(run_dir)))
+    assert result["decisions_sha256"] == ref["decisions_sha256"] and result["total_cost"] == ref["total_cost"]

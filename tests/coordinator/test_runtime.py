@@ -74,7 +74,7 @@ with open_session(SessionArgs(mode="client", connect=[sys.argv[2]], certs=sys.ar
     token = s.liveliness().declare_token(keys.alive(1))
     turns.recv()
     s.put(keys.control(1), b"not msgpack at all")
-    s.put(keys.control(1), Control(t=0, agent=0, control=0).encode())
+    s.put(keys.control(1), Control(t=0, agent=0, control=0, epoch=0).encode())
     time.sleep(deadline + 0.5)
     token.undeclare()
 """
