@@ -26,7 +26,7 @@ def test_the_observer_reads_what_a_follower_needs_and_writes_nothing() -> None:
     subscribed = {k for m, k in ingress if m == "declare_subscriber"}
     assert subscribed == {f"surge/r/{k}" for k in OBSERVED} | {"surge/r/dropoffs"}
     assert {k for m, k in ingress if m == "query"} == {"surge/r/spec", "surge/r/snapshot", "surge/r/forecast/*"}
-    assert {k for m, k in ingress if m == "declare_liveliness_subscriber"} == {"surge/r/alive/*", "surge/r/coordinator"}
+    assert {k for m, k in ingress if m == "declare_liveliness_subscriber"} == {"surge/r/alive/*", "surge/r/coordinator/*"}
     # what only the coordinator may read stays its own: proposed controls, acks, the predictor
     assert not any(k.split("/")[2] in ("control", "ack", "predictor") for _, k in ingress)
     acl = access_control(2, "r")
