@@ -14,7 +14,7 @@ each building its own copy.  Two things are left to each agent:
 
 from __future__ import annotations
 
-import agents.taxi  # noqa: F401  # the agent's imports, once
+import agents.taxi  # noqa: F401 - imported for its side effect: the agent's imports, once
 from agents.rollout import warm_up
 from city.scenario import load_city
 

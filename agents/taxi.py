@@ -198,7 +198,7 @@ class TaxiAgent:
         """Load (or build) the compiled kernels before joining, so that a fresh checkout's first turn is not late."""
         warm_up(self.city, self.rollout)
 
-    def _fetch_spec(self, session) -> RunSpec:  # noqa: ANN001
+    def _fetch_spec(self, session) -> RunSpec:
         """The first acceptable answer on ``spec``; the city is built from it.  A bad answer is dropped and the agent asks again."""
         deadline = time.monotonic() + self.cfg.join_timeout_s
         why = "no answer"
@@ -250,7 +250,7 @@ class TaxiAgent:
         self.forecasts = AgentForecasts(city, rollout, bounds, self.rejected)
         return spec
 
-    def _snapshot(self, session) -> None:  # noqa: ANN001
+    def _snapshot(self, session) -> None:
         """Take the coordinator's snapshot: the full state, with its base controls, and the hour's forecast."""
         key = self.keys.snapshot
         for reply in session.get(key, timeout=5.0):
@@ -299,7 +299,7 @@ class TaxiAgent:
             raise WireError(f"{key}: a {what} of run epoch {epoch}, whose coordinator was taken over by epoch {self.epoch}")
         self.epoch = epoch
 
-    def handle(self, session, tag: str, key: str, payload: bytes) -> bool:  # noqa: ANN001
+    def handle(self, session, tag: str, key: str, payload: bytes) -> bool:
         """Check and apply one message; ``False`` when it is the run's stop."""
         if tag == "stop":
             stop = check_stop(decode(payload, Stop, key), key, self.bounds)  # type: ignore[arg-type]
@@ -332,7 +332,7 @@ class TaxiAgent:
             self.pending = check_turn(turn, key, self.me, self.bounds, minute)  # type: ignore[arg-type]
         return True
 
-    def _on_coordinator(self, session, key: str, present: bool) -> None:  # noqa: ANN001
+    def _on_coordinator(self, session, key: str, present: bool) -> None:
         """A coordinator's token came or went.
 
         The coordinator is present while a token of the highest epoch seen is.
@@ -365,7 +365,7 @@ class TaxiAgent:
         if (was_gone is not None or newer) and self.view.obs is not None:
             self._snapshot(session)
 
-    def _check_health(self, session) -> None:  # noqa: ANN001
+    def _check_health(self, session) -> None:
         """Leave when the coordinator is gone past the grace period; take a snapshot when a turn is stuck on something lost."""
         now = time.monotonic()
         if self.coordinator_seen and self.coordinator_gone is not None and not self.gone_logged \
@@ -399,7 +399,7 @@ class TaxiAgent:
             committed[a] = c
         return committed
 
-    def _loop(self, session, inbox: Inbox, out) -> None:  # noqa: ANN001
+    def _loop(self, session, inbox: Inbox, out) -> None:
         while True:
             self._check_health(session)
             item = inbox.get(timeout=0.25)
@@ -430,7 +430,7 @@ class TaxiAgent:
                 return
             self.context = prepare_step(self.city, self.rollout, obs, tables, obs.t % 60, base=self.view.base)
 
-    def _maybe_plan(self, out) -> None:  # noqa: ANN001
+    def _maybe_plan(self, out) -> None:
         turn, obs = self.pending, self.view.obs
         if turn is not None and turn.epoch < self.epoch:
             self.pending = None  # a turn of a coordinator taken over since it came

@@ -142,7 +142,7 @@ def fleet_size(certs_dir: str | Path) -> int:
     return taxis
 
 
-def _private_key():  # noqa: ANN202
+def _private_key():
     from cryptography.hazmat.primitives.asymmetric import ec
 
     return ec.generate_private_key(ec.SECP256R1())
@@ -156,7 +156,7 @@ def _write(path: Path, data: bytes, mode: int) -> None:
     os.chmod(path, mode)  # the umask may have narrowed it further; make it exact
 
 
-def _san(hosts: list[str]):  # noqa: ANN202
+def _san(hosts: list[str]):
     from cryptography import x509
 
     names = []

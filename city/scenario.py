@@ -204,7 +204,7 @@ def read_streets(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray
         to_lonlat = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
         xy = np.column_stack(to_lonlat.transform(xy[:, 0], xy[:, 1]))
     return osmid, xy, u, v, length, source
-def load_zone_profile(path: Path, city: City):  # noqa: ANN201 - city.io.trips.ZoneProfile, imported lazily
+def load_zone_profile(path: Path, city: City):
     """:func:`city.io.trips.read_zone_profile`, cached on disk by file and city (the CSV takes seconds to parse)."""
     from city.io.trips import ZoneProfile, read_zone_profile
 
@@ -334,7 +334,7 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int, seed: int = 0, sha
     return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, share=share or FLEET_SHARE, naming=naming, **calendar)
 
 
-def sample_trips(table, share: float, seed: int):  # noqa: ANN001, ANN201
+def sample_trips(table, share: float, seed: int):
     """A seeded ``share`` of the trips of a :class:`city.io.trips.TripTable` (each kept with probability ``share``)."""
     from city.io.trips import TripTable
 

@@ -47,7 +47,7 @@ def epoch_time(epoch: int) -> str:
     return dt.datetime.fromtimestamp(epoch / 1000, dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
-def live_epochs(session, keys: Keys) -> list[int]:  # noqa: ANN001
+def live_epochs(session, keys: Keys) -> list[int]:
     """The run epochs of the run's coordinators whose tokens are alive now."""
     epochs = []
     for reply in session.liveliness().get(keys.all_coordinators, timeout=LIVE_QUERY_S):
@@ -64,7 +64,7 @@ class Claim:
     fenced: bool
 
 
-def claim(session, keys: Keys, stack: ExitStack, *, resume: bool, takeover: bool, resumed_epoch: int = 0) -> Claim:  # noqa: ANN001
+def claim(session, keys: Keys, stack: ExitStack, *, resume: bool, takeover: bool, resumed_epoch: int = 0) -> Claim:
     """Choose the epoch; refuse a run with a live coordinator, or fence it with ``takeover`` (its token undeclared by ``stack``).
 
     ``resumed_epoch`` is the epoch of the checkpoint a resumed coordinator starts from.

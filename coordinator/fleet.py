@@ -33,7 +33,7 @@ from city.errors import ConfigError, SurgeError
 from coordinator.runtime import FleetConfig
 
 
-def agent_context():  # noqa: ANN201 - a multiprocess context
+def agent_context():
     """The context that starts agent processes: forked by a fork server that imported :mod:`agents.preload` first.
 
     The fork server is a fresh process (not a fork of this one, which may hold
@@ -155,7 +155,7 @@ def _launch(cfg: FleetConfig, certs: str | None, result_path: str, startup_timeo
     procs: list = []
     router_args = SessionArgs(mode="router", listen=[endpoint], certs=certs, identity="router", run=cfg.run)
 
-    def start_router():  # noqa: ANN202 - a multiprocess Process
+    def start_router():
         p = ctx.Process(target=router_main, args=(router_args,), name="surge-router")
         p.start()
         procs.append(p)

@@ -99,7 +99,7 @@ class EnvConfig:
 
 
 @functools.lru_cache(maxsize=4)
-def _load_scenario(name: str, data_dir: str | None, world_seed: int, year: int):  # noqa: ANN202
+def _load_scenario(name: str, data_dir: str | None, world_seed: int, year: int):
     """Scenarios built once per process: environments are made and remade many times (vectorised envs, tests)."""
     from city.scenario import load_scenario
 

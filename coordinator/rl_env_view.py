@@ -115,7 +115,7 @@ def close(state: dict) -> None:
         plt.close(state.pop("fig"))
 
 
-def _paint(ax, city: City, obs: Observation, title: str) -> None:  # noqa: ANN001 - a matplotlib Axes, imported lazily
+def _paint(ax, city: City, obs: Observation, title: str) -> None:
     from matplotlib.collections import LineCollection
 
     src = np.repeat(np.arange(city.n_nodes), np.diff(city.indptr))

@@ -138,7 +138,7 @@ class FleetConfig:
         """The forecast provider the run uses: the ``forecast`` option, or the policy's default."""
         return str(self.options.get("forecast") or self.policy_class().defaults["forecast"])
 
-    def make_policy(self, city) -> RolloutPolicy:  # noqa: ANN001
+    def make_policy(self, city) -> RolloutPolicy:
         """The in-process policy: the reference, and the forecast source when there is no predictor service."""
         self.policy_class()
         return make_policy(self.policy, city, **self.options)  # type: ignore[return-value]
@@ -363,7 +363,7 @@ class Coordinator:
         self.running = True
         log(f"all {self.cfg.taxis} agents joined run {self.cfg.run!r}")
 
-    def _run(self, session, inbox: Inbox) -> dict:  # noqa: ANN001
+    def _run(self, session, inbox: Inbox) -> dict:
         cfg, keys = self.cfg, self.keys
         def counted(pub: Any) -> Counted:  # every message the coordinator sends is counted
             return Counted(pub, self.tally.traffic)
@@ -450,7 +450,7 @@ class Coordinator:
         if pub is not None:
             pub.put(forecast, hour)
 
-    def _forecast(self, session, inbox: Inbox, hour: int) -> bytes:  # noqa: ANN001
+    def _forecast(self, session, inbox: Inbox, hour: int) -> bytes:
         """The encoded forecast of the episode's hour ``hour``: computed here, or asked of the predictor service."""
         if self.policy is not None:
             fc = self.policy.forecast(hour)

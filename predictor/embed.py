@@ -228,7 +228,7 @@ class EmbeddingCache:
         return len(self._mem)
 
 
-def _tokenizer_of(model):  # noqa: ANN202
+def _tokenizer_of(model):
     """The model's own tokenization: ``preprocess`` in recent sentence-transformers, which deprecate ``tokenize``."""
     return getattr(model, "preprocess", None) or model.tokenize
 

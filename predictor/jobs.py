@@ -69,7 +69,7 @@ class EvalJob:
             raise ConfigError("--bootstrap must be >= 1")
 
 
-def input_lines(world, trips, job, timezone: str) -> list[str]:  # noqa: ANN001 - a demand world, a TripTable, a TrainJob
+def input_lines(world, trips, job, timezone: str) -> list[str]:
     """What training read, one line each: the events and the trips (files, rows kept and dropped) or the world's own."""
     if job.events:
         events = f"events: {len(world.events)} from {job.events}" + (f" with reviews from {job.reviews}" if job.reviews else "")

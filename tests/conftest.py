@@ -96,7 +96,7 @@ def shared_data() -> Path:
 
 
 @pytest.fixture(scope="session")
-def synthetic_scenario():  # noqa: ANN201
+def synthetic_scenario():
     """The embedded synthetic city and its demand world (built once per session)."""
     from city.scenario import load_scenario
 
@@ -104,7 +104,7 @@ def synthetic_scenario():  # noqa: ANN201
 
 
 @pytest.fixture(scope="session")
-def compiled_kernels(synthetic_scenario) -> None:  # noqa: ANN001
+def compiled_kernels(synthetic_scenario) -> None:
     """Compile the rollout kernels into numba's on-disk cache once, here, before agent processes need them.
 
     On a fresh checkout every spawned agent would otherwise compile them at once, on two cores.

@@ -30,7 +30,7 @@ from bus.router import free_tcp_port, wait_for_tcp
 CLI = [sys.executable, "-m", "coordinator.cli"]
 
 
-def browser(url: str, profile: str):  # noqa: ANN201 - a selenium driver on the page
+def browser(url: str, profile: str):
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 

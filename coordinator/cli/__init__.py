@@ -43,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _warn_one_line(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+def _warn_one_line(message, category, filename, lineno, file=None, line=None) -> None:
     print(f"surge: warning: {message}", file=sys.stderr)
 
 

@@ -35,7 +35,7 @@ from coordinator.fleet import (
 from coordinator.runtime import FleetConfig
 
 
-def fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  # noqa: ANN001
+def fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:
     p.add_argument("--run", default="demo", help="run name: the key-expression prefix surge/<run>/ (default: demo)")
     scenario_args(p)
     p.add_argument("--date", type=iso_date, default="2022-11-17")
@@ -60,7 +60,7 @@ def fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:  # 
     p.add_argument("--json", default=None, help="write the run's result here")
 
 
-def _checkpoint_args(p, verb: str) -> None:  # noqa: ANN001
+def _checkpoint_args(p, verb: str) -> None:
     p.add_argument("--run-dir", default=None, metavar="DIR",
                    help="checkpoint the run here after each minute, so that `--resume DIR` can continue it; one coordinator "
                         "at a time holds it (a lock file) (default: a new runs/<run>-<UTC time>-<pid> in surge's cache, "
@@ -70,12 +70,12 @@ def _checkpoint_args(p, verb: str) -> None:  # noqa: ANN001
                    help=f"continue the run checkpointed in RUN_DIR (its settings come from the checkpoint; the bus flags apply{extra})")
 
 
-def _grace_arg(p) -> None:  # noqa: ANN001
+def _grace_arg(p) -> None:
     p.add_argument("--grace", type=float, default=30.0,
                    help="seconds an agent waits for a vanished coordinator (a restart, `--resume`) before it leaves")
 
 
-def fleet_config(args) -> FleetConfig:  # noqa: ANN001
+def fleet_config(args) -> FleetConfig:
     from agents.base import parse_policy
     from city.scenario import check_scenario
 
@@ -114,7 +114,7 @@ def _print_result(result: dict, path: str | None) -> None:
         print(f"wrote {path}")
 
 
-def _run_dir(args) -> tuple[FleetConfig, str]:  # noqa: ANN001
+def _run_dir(args) -> tuple[FleetConfig, str]:
     """The run's config and checkpoint directory: from the checkpoint with ``--resume``, else from the flags."""
     if args.resume is not None:
         cfg, run_dir = resumed_config(args.resume), args.resume
@@ -138,7 +138,7 @@ def _say_checkpoint(run_dir: str, verb: str) -> None:
     log(f"checkpointing each minute to {run_dir}; `surge {verb} --resume {run_dir}` continues the run")
 
 
-def cmd_fleet(args) -> int:  # noqa: ANN001
+def cmd_fleet(args) -> int:
     from bus.session import warn_insecure
 
     cfg, run_dir = _run_dir(args)
@@ -169,7 +169,7 @@ def cmd_fleet(args) -> int:  # noqa: ANN001
     return 0
 
 
-def cmd_router(args) -> int:  # noqa: ANN001
+def cmd_router(args) -> int:
     from coordinator.cli.options import session_args
 
     bus = session_args(args, identity="router", run=args.run)
@@ -192,7 +192,7 @@ def _nested(overrides: dict) -> dict:
     return out
 
 
-def cmd_coordinator(args) -> int:  # noqa: ANN001
+def cmd_coordinator(args) -> int:
     from coordinator.cli.options import session_args
     from coordinator.runtime import coordinator_main
 
@@ -221,7 +221,7 @@ def parse_ids(text: str) -> list[int]:
     return sorted(set(out))
 
 
-def cmd_agents(args) -> int:  # noqa: ANN001
+def cmd_agents(args) -> int:
     from coordinator.cli.options import session_args
 
     if args.grace <= 0:
@@ -253,7 +253,7 @@ def cmd_agents(args) -> int:  # noqa: ANN001
     return 0
 
 
-def cmd_certs(args) -> int:  # noqa: ANN001
+def cmd_certs(args) -> int:
     from bus.certs import ROLES
 
     written = make_certs(args.out, args.taxis, args.host or None, args.days)
@@ -271,7 +271,7 @@ def cmd_certs(args) -> int:  # noqa: ANN001
     return 0
 
 
-def threads_arg(p) -> None:  # noqa: ANN001
+def threads_arg(p) -> None:
     """``--agent-threads``: what a host running many agents gives each one's kernel.
 
     The default, ``share``, splits the host's cores among the agents of the run
@@ -298,7 +298,7 @@ def _threads(text: str) -> int | str:
     return n
 
 
-def add_parser(sub) -> None:  # noqa: ANN001
+def add_parser(sub) -> None:
     from coordinator.cli.options import add_security_args, add_session_args
 
     p = sub.add_parser("fleet", help="the local multi-process fleet: router, coordinator and one process per taxi on loopback")

@@ -33,7 +33,7 @@ class DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
 class SurgeParser(argparse.ArgumentParser):
     """Every ``surge`` parser and subparser: defaults shown in ``--help``."""
 
-    def __init__(self, *args, formatter_class: type = DefaultsFormatter, **kwargs) -> None:  # noqa: ANN002, ANN003 - argparse's own
+    def __init__(self, *args, formatter_class: type = DefaultsFormatter, **kwargs) -> None:
         super().__init__(*args, formatter_class=formatter_class, **kwargs)
 
 

@@ -86,7 +86,7 @@ MANHATTAN_ZONES = (4, 12, 13, 24, 41, 42, 43, 45, 48, 50, 68, 74, 75, 79, 87, 88
 SHORTCUT_NAMES = tuple(f.name for f in dataclasses.fields(Shortcuts))
 
 
-def shortcut_variant(name: str):  # noqa: ANN201
+def shortcut_variant(name: str):
     """``all`` (the defaults), ``none``, ``no-NAME`` or ``with-NAME`` as :class:`agents.shortcuts.Shortcuts`.
 
     ``with-NAME`` turns on a saving that is off by default (``minute_lists``); a bad name is a :class:`ConfigError`.

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 
-def surge_vs_greedy(cfg, fleet: dict, out: Path) -> list[str]:  # noqa: ANN001
+def surge_vs_greedy(cfg, fleet: dict, out: Path) -> list[str]:
     """Table lines comparing the distributed ``surge`` run, its in-process replay and ``greedy``; writes the map and the GIF.
 
     ``cfg`` is the run's :class:`coordinator.runtime.FleetConfig`; ``fleet`` the distributed run's result.

@@ -88,7 +88,7 @@ def _flat_space(space: gymnasium.spaces.Dict) -> gymnasium.spaces.Box:
 class ObservedMasks(VecEnvWrapper):
     """Answers maskable PPO's ``action_masks`` from the last observations, whose tail is the mask (:func:`flat`)."""
 
-    def __init__(self, venv, slots: int) -> None:  # noqa: ANN001 - SuperSuit's SB3 vector env
+    def __init__(self, venv, slots: int) -> None:
         super().__init__(venv)
         self.slots = slots
         self.last: np.ndarray | None = None
@@ -97,7 +97,7 @@ class ObservedMasks(VecEnvWrapper):
         self.last = self.venv.reset()
         return self.last
 
-    def step_wait(self):  # noqa: ANN201 - SB3's VecEnvStepReturn
+    def step_wait(self):
         obs, rewards, dones, infos = self.venv.step_wait()
         self.last = obs
         return obs, rewards, dones, infos
@@ -105,7 +105,7 @@ class ObservedMasks(VecEnvWrapper):
     def has_attr(self, attr_name: str) -> bool:
         return attr_name == "action_masks" or self.venv.has_attr(attr_name)
 
-    def env_method(self, method_name: str, *args, indices=None, **kwargs) -> list:  # noqa: ANN001, ANN002, ANN003 - SB3's signature
+    def env_method(self, method_name: str, *args, indices=None, **kwargs) -> list:
         if method_name != "action_masks":
             return self.venv.env_method(method_name, *args, indices=indices, **kwargs)
         assert self.last is not None, "reset() first"

@@ -80,7 +80,7 @@ class LiveFeed:
         with self._lock:
             self._frame = (self._frame[0] + 1, text)
 
-    def _ask(self, session, key: str, timeout: float = 5.0) -> list[bytes]:  # noqa: ANN001
+    def _ask(self, session, key: str, timeout: float = 5.0) -> list[bytes]:
         return [r.ok.payload.to_bytes() for r in session.get(key, timeout=timeout) if r.ok is not None]
 
     def _main(self) -> None:
@@ -96,7 +96,7 @@ class LiveFeed:
                 self.error = self.error or "the bus thread stopped before the run's spec came (see the traceback above)"
                 self.ready.set()
 
-    def _spec(self, session) -> RunSpec:  # noqa: ANN001
+    def _spec(self, session) -> RunSpec:
         deadline = time.monotonic() + self.cfg.join_timeout_s
         while not self._stop.is_set():
             for payload in self._ask(session, self.keys.spec):
@@ -107,7 +107,7 @@ class LiveFeed:
             time.sleep(0.5)
         raise ConfigError("stopped before the run's spec came")
 
-    def _follow(self, session) -> None:  # noqa: ANN001
+    def _follow(self, session) -> None:
         from city.scenario import load_scenario
 
         inbox = Inbox()
@@ -140,7 +140,7 @@ class LiveFeed:
         msg = decode(payload, SectorForecast)
         view.forecast(msg.hour, msg.sector, float(msg.eta))  # type: ignore[attr-defined]
 
-    def _apply(self, session, view: FleetView, tag: str, key: str, payload: bytes) -> None:  # noqa: ANN001
+    def _apply(self, session, view: FleetView, tag: str, key: str, payload: bytes) -> None:
         try:
             if tag == "state":
                 s: State = decode(payload, State, key)  # type: ignore[assignment]
@@ -164,7 +164,7 @@ class LiveFeed:
     def _state(view: FleetView, s: State) -> bool:
         return view.state(s.t, s.full, s.pos, s.tau, (s.new_index, s.new_pickup, s.new_entry), s.picked, s.outstanding)
 
-    def _snapshot(self, session, view: FleetView) -> None:  # noqa: ANN001
+    def _snapshot(self, session, view: FleetView) -> None:
         for payload in self._ask(session, self.keys.snapshot):
             snap: Snapshot = decode(payload, Snapshot, self.keys.snapshot)  # type: ignore[assignment]
             self._state(view, decode(snap.state, State, self.keys.snapshot))  # type: ignore[arg-type]

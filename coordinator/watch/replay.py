@@ -35,7 +35,7 @@ class Replay:
     summary: dict
 
 
-def run_config(doc: dict, path: Path, fallback):  # noqa: ANN001, ANN201 - a FleetConfig
+def run_config(doc: dict, path: Path, fallback):
     """The run's :class:`~coordinator.runtime.FleetConfig`: its ``config`` entry, else ``fallback`` sized by the file."""
     from coordinator.runtime import FleetConfig
 
@@ -70,7 +70,7 @@ def read_results(path: str | Path) -> dict:
     return doc
 
 
-def build_replay(path: str | Path, fallback) -> Replay:  # noqa: ANN001
+def build_replay(path: str | Path, fallback) -> Replay:
     """Replay the results file at ``path`` into frames; ``fallback`` is the config to use when the file records none."""
     from agents.forecast_providers import make_provider
 

@@ -77,7 +77,7 @@ def test_controls_do_not_depend_on_the_threads_each_chunk_of_samples_runs_on(bas
     assert hashes[0] == hashes[1]
 
 
-def test_a_share_that_cannot_write_its_directory_plans_as_if_alone(tmp_path) -> None:  # noqa: ANN001
+def test_a_share_that_cannot_write_its_directory_plans_as_if_alone(tmp_path) -> None:
     share = CoreShare("x", 2)
     share.dir = tmp_path / "not-a-directory"
     share.dir.write_text("")  # a file where the directory should be: nothing can be marked there

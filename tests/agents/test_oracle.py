@@ -87,7 +87,7 @@ def _tiny(seed: int) -> tuple[City, Requests, np.ndarray, int]:
     return city, req, rng.integers(0, 9, 2).astype(np.int32), minutes
 
 
-def test_planned_routes_are_driven_exactly_as_timed(synthetic_scenario) -> None:  # noqa: ANN001
+def test_planned_routes_are_driven_exactly_as_timed(synthetic_scenario) -> None:
     city, world = synthetic_scenario.city, synthetic_scenario.world
     req = episode_requests(world, dt.date(2022, 11, 17), 19, 30)
     start = initial_positions(city, 30, 4)
@@ -99,7 +99,7 @@ def test_planned_routes_are_driven_exactly_as_timed(synthetic_scenario) -> None:
     assert again == (routes, value)
 
 
-def test_oracle_is_no_worse_than_the_auction(synthetic_scenario) -> None:  # noqa: ANN001
+def test_oracle_is_no_worse_than_the_auction(synthetic_scenario) -> None:
     city, world = synthetic_scenario.city, synthetic_scenario.world
     for hour, seed in ((17, 0), (19, 1), (21, 2)):
         req = episode_requests(world, dt.date(2022, 11, 17), hour, 30)

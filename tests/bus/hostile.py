@@ -33,7 +33,7 @@ def config(endpoint: str, certs: str | None = None, name: str | None = None, ca:
     return c
 
 
-def try_open(conf: zenoh.Config):  # noqa: ANN201
+def try_open(conf: zenoh.Config):
     try:
         return zenoh.open(conf)
     except Exception:  # refused: what the tests expect of most identities
@@ -61,10 +61,10 @@ def probe(a: dict) -> dict:
     s = {n: zenoh.open(config(ep, certs, n)) for n in ("coordinator", "predictor", "taxi-0", "taxi-3", "taxi-4")}
     seen: queue.SimpleQueue = queue.SimpleQueue()
 
-    def watch(who: str):  # noqa: ANN202
+    def watch(who: str):
         return lambda sample: seen.put((who, str(sample.key_expr), sample.payload.to_bytes().decode(errors="replace")))
 
-    def answer(text: str):  # noqa: ANN202
+    def answer(text: str):
         return lambda q: (q.reply(q.key_expr, text.encode()), q.drop())
 
     co, t0, t3, t4, pr = s["coordinator"], s["taxi-0"], s["taxi-3"], s["taxi-4"], s["predictor"]
@@ -125,7 +125,7 @@ def probe(a: dict) -> dict:
 
 
 # ----------------------------------------------------------------- attack
-def junk(rng: random.Random, depth: int = 0):  # noqa: ANN201
+def junk(rng: random.Random, depth: int = 0):
     """A random msgpack-able value."""
     pick = rng.randrange(8 if depth < 3 else 5)
     if pick == 0:

@@ -103,7 +103,7 @@ def test_bad_arrays_are_caught() -> None:
         decode(msgpack.packb(fc), ForecastMsg, "k")
 
 
-def test_state_deltas_rebuild_every_observation(synthetic_scenario) -> None:  # noqa: ANN001
+def test_state_deltas_rebuild_every_observation(synthetic_scenario) -> None:
     import datetime as dt
 
     city, world = synthetic_scenario.city, synthetic_scenario.world
@@ -161,7 +161,7 @@ def test_session_settings(capsys: pytest.CaptureFixture) -> None:
         SessionArgs(config="/nonexistent.json5").zenoh_config()
 
 
-def test_secured_session_settings(tmp_path) -> None:  # noqa: ANN001
+def test_secured_session_settings(tmp_path) -> None:
     from bus.certs import make_certs
 
     p = argparse.ArgumentParser()

@@ -43,7 +43,7 @@ def test_surge_certs_makes_the_observer_certificate(tmp_path: Path) -> None:
 
 
 @pytest.fixture()
-def router(tmp_path: Path):  # noqa: ANN201 - yields the bus settings of a secured router for run "r"
+def router(tmp_path: Path):
     certs = tmp_path / "certs"
     make_certs(certs, 2)
     port = free_tcp_port()

@@ -33,7 +33,7 @@ from tests.agents.test_planning_speed import forecast, seeded_state
 
 
 @contextlib.contextmanager
-def _answering(session, key: str, answer: Callable[[str], bytes], asked: list[str] | None = None) -> Iterator[None]:  # noqa: ANN001
+def _answering(session, key: str, answer: Callable[[str], bytes], asked: list[str] | None = None) -> Iterator[None]:
     """A stand-in coordinator: a queryable on ``key`` that answers each query with ``answer(its key)``, from a thread."""
     import zenoh
 
@@ -60,7 +60,7 @@ def _answering(session, key: str, answer: Callable[[str], bytes], asked: list[st
         answers.undeclare()
 
 
-def _pieces(city, fc, config: RolloutConfig, sectors) -> AgentForecasts:  # noqa: ANN001
+def _pieces(city, fc, config: RolloutConfig, sectors) -> AgentForecasts:
     """A taxi's store fed the given sectors of ``fc`` and the drop-offs, as the bus would hand them in."""
     keys = Keys("p")
     got = AgentForecasts(city, config, Bounds(taxis=1, nodes=city.n_nodes, sectors=city.n_sectors, minutes=60), Rejections(print))

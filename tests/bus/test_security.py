@@ -128,13 +128,13 @@ def test_taxi_3s_certificate_can_do_only_what_taxi_3_does(secured: dict) -> None
     assert secured["router"].poll() is None
 
 
-def _lines(stream, into: list[str]) -> threading.Thread:  # noqa: ANN001
+def _lines(stream, into: list[str]) -> threading.Thread:
     t = threading.Thread(target=lambda: into.extend(iter(stream.readline, "")), daemon=True)
     t.start()
     return t
 
 
-def test_forged_stays_and_a_fuzz_flood_change_nothing(secured: dict, tmp_path: Path, synthetic_scenario) -> None:  # noqa: ANN001
+def test_forged_stays_and_a_fuzz_flood_change_nothing(secured: dict, tmp_path: Path, synthetic_scenario) -> None:
     """Every identity but taxi 3's answers taxi 3's turns with "stay"; 10,000 fuzz messages on every key a taxi may write."""
     pytest.importorskip("numba")
     from agents.rollout import warm_up
@@ -192,7 +192,7 @@ def test_forged_stays_and_a_fuzz_flood_change_nothing(secured: dict, tmp_path: P
 
 
 # ------------------------------------------------------ distrust on receipt
-def _agent(run: str = "u", me: int = 1):  # noqa: ANN202
+def _agent(run: str = "u", me: int = 1):
     """An agent that accepted a 3-taxi spec of the synthetic city, with no bus (messages are handed in)."""
     from agents.rollout import RolloutConfig
     from agents.taxi import AgentConfig, TaxiAgent
@@ -305,7 +305,7 @@ def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> 
     assert coord._handle(("alive", k.alive(7), True), want) is None and coord.health.alive == set()
 
     class Gone:
-        def reply(self, *_, **__):  # noqa: ANN002, ANN003
+        def reply(self, *_, **__):
             raise RuntimeError("the querier left")
 
         def drop(self) -> None:

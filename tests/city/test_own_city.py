@@ -19,7 +19,7 @@ GRIDVILLE = ROOT / "examples" / "gridville" / "gridville.toml"
 NEW_YORK_WORDS = ("Knicks", "NY ", "New York", "Hudson", "Garden Arena", "Harlem", "Celtics", "Big East")
 
 
-def _all_text(world) -> str:  # noqa: ANN001 - a DemandWorld
+def _all_text(world) -> str:
     events = " ".join(e.title + " " + e.description + " " + " ".join(e.reviews) for e in world.events)
     return events + " " + " ".join(v.name for v in world.venues)
 

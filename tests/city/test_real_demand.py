@@ -198,12 +198,12 @@ def test_events_count_only_above_their_usual_level() -> None:
 
 
 @pytest.fixture(scope="module")
-def city():  # noqa: ANN201 - city.graph.City
+def city():
     return zone_city()
 
 
 @pytest.fixture(scope="module")
-def profile(city, tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN001, ANN201 - city.io.trips.ZoneProfile
+def profile(city, tmp_path_factory: pytest.TempPathFactory):
     from city.io.trips import read_zone_profile
 
     rows = [(d, s, a, b, 51 * (1 + (a == 10) + d)) for d in range(5) for s in range(0, 96, 2) for a in ZONES for b in ZONES]
@@ -214,14 +214,13 @@ def weather(rain: float) -> HourlyWeather:
     return HourlyWeather(2022, np.full(H, 60.0), np.full(H, rain), np.full(H, 5.0), f"rain {rain}")
 
 
-def test_world_level_is_the_files_count_times_share(tmp_path: Path, city, profile) -> None:  # noqa: ANN001
+def test_world_level_is_the_files_count_times_share(tmp_path: Path, city, profile) -> None:
     counts = year_counts()
     totals = read_hourly_totals(write_hourly_csv(tmp_path / "h.csv", counts), columns={"count": "trip_count"})
     w = synthetic_world(city, seed=1, weather=weather(0.0), zone_profile=profile, hourly_totals=totals, share=0.05)
     np.testing.assert_allclose(w.real_level(), counts * 0.05)
     thursday = w.hour_index(dt.datetime(2022, 11, 17, 19))
     assert w.real_level()[thursday] == counts[thursday] * 0.05
-    kinds = day_kinds(2022, w.holidays)
     events = w.event_rate().sum(axis=1)
     level = counts * 0.05
     weekdays = day_kinds(2022, frozenset())  # the usual event level is per weekday: the calendar ignores holidays
@@ -236,7 +235,7 @@ def test_world_level_is_the_files_count_times_share(tmp_path: Path, city, profil
     assert old.real_level() is None and old.demand_source == "zone-od p.csv, share 0.05"
 
 
-def test_default_share_puts_the_reference_hour_at_ref_rate(tmp_path: Path, city, profile) -> None:  # noqa: ANN001
+def test_default_share_puts_the_reference_hour_at_ref_rate(tmp_path: Path, city, profile) -> None:
     from city.demand.profile import REF_RATE
 
     counts = year_counts()

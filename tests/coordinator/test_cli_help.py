@@ -13,8 +13,8 @@ from coordinator.cli import build_parser, main
 
 def _commands(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
     out = [path]
-    for action in parser._actions:  # noqa: SLF001 - argparse exposes its subcommands nowhere else
-        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001 - as above
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
             for name, sub in action.choices.items():
                 out += _commands(sub, (*path, name))
     return out
@@ -68,7 +68,7 @@ def test_a_model_flag_must_name_a_trained_predictor(tmp_path: Path, capsys: pyte
     lambda d: d["episodes"][0].__setitem__("date", 7),
     lambda d: d.__setitem__("config", []),
 ])
-def test_report_answers_a_bad_results_file_in_one_line(mutate, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:  # noqa: ANN001
+def test_report_answers_a_bad_results_file_in_one_line(mutate, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     good = tmp_path / "good.json"
     assert main(["evaluate", "--hours", "19", "--seeds", "1", "--taxis", "3", "--minutes", "3", "--policies", "greedy", "--json", str(good)]) == 0
     doc = json.loads(good.read_text())

@@ -6,19 +6,19 @@ import pytest
 
 pytest.importorskip("pettingzoo")
 
-import warnings  # noqa: E402
+import warnings
 
-import numpy as np  # noqa: E402
-from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, seed_test  # noqa: E402
-from pettingzoo.test.state_test import state_test  # noqa: E402
-from pettingzoo.utils.conversions import aec_to_parallel, parallel_to_aec  # noqa: E402
+import numpy as np
+from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, seed_test
+from pettingzoo.test.state_test import state_test
+from pettingzoo.utils.conversions import aec_to_parallel, parallel_to_aec
 
-from city.errors import ConfigError  # noqa: E402
+from city.errors import ConfigError
 
-from agents.greedy import greedy_controls  # noqa: E402
-from coordinator.experiments.evaluate import EvalConfig, evaluate  # noqa: E402
-from coordinator.rl_env import EnvConfig, FleetAECEnv, FleetParallelEnv  # noqa: E402
-from coordinator.rl_env_view import display_available  # noqa: E402
+from agents.greedy import greedy_controls
+from coordinator.experiments.evaluate import EvalConfig, evaluate
+from coordinator.rl_env import EnvConfig, FleetAECEnv, FleetParallelEnv
+from coordinator.rl_env_view import display_available
 
 SMALL = EnvConfig(taxis=6, minutes=12, hour=19)
 TWENTY = EnvConfig(taxis=20, minutes=30, hour=19)
@@ -36,7 +36,7 @@ ENVS = {
 }
 
 
-def _warnings_besides_dict_space(run) -> set[str]:  # noqa: ANN001 - a zero-argument callable
+def _warnings_besides_dict_space(run) -> set[str]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         run()
@@ -85,7 +85,7 @@ def test_aec_and_wrapped_parallel_agree_minute_by_minute() -> None:
 
 
 @pytest.mark.parametrize("make", [FleetAECEnv, FleetParallelEnv])
-def test_render_rgb_array_draws_the_map(make) -> None:  # noqa: ANN001 - an env class
+def test_render_rgb_array_draws_the_map(make) -> None:
     env = make(TWENTY, render_mode="rgb_array")
     env.reset(seed=0)
     image = env.render()

@@ -445,7 +445,7 @@ def test_a_checkpoint_restores_the_run_and_a_bad_one_is_one_line(tmp_path: Path)
     assert back._partition(Inbox(), 4) is False  # worn down one agent at a time long ago: the clock goes on without them
 
 
-def _turn_rig(taxis: int, deadline_s: float):  # noqa: ANN202
+def _turn_rig(taxis: int, deadline_s: float):
     """A coordinator without a bus, and publishers that log the turns and commits it sends, in order."""
     from bus.wire import Control, Turn, decode
     from coordinator.runtime import Coordinator, FleetConfig

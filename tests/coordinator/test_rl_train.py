@@ -13,8 +13,8 @@ import pytest
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
-from coordinator.experiments.evaluate import EvalConfig, evaluate  # noqa: E402
-from coordinator.experiments.rl_train import TrainConfig, greedy_policy, play  # noqa: E402
+from coordinator.experiments.evaluate import EvalConfig, evaluate
+from coordinator.experiments.rl_train import TrainConfig, greedy_policy, play
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -157,7 +157,7 @@ with open_session(SessionArgs(mode="client", connect=[sys.argv[1]], certs=sys.ar
 """
 
 
-def test_predictor_service_refuses_bad_requests_and_keeps_serving(router: list[str], synthetic_scenario) -> None:  # noqa: ANN001
+def test_predictor_service_refuses_bad_requests_and_keeps_serving(router: list[str], synthetic_scenario) -> None:
     import datetime as dt
 
     serve = subprocess.Popen([*CLI, "predictor", "serve", *router, "--run", "ask", "--forecast", "true-rate"],

@@ -70,11 +70,11 @@ def _watch(args: list[str], port: int) -> subprocess.Popen:
     return proc
 
 
-def _text(driver, element_id: str) -> str:  # noqa: ANN001
+def _text(driver, element_id: str) -> str:
     return driver.find_element("id", element_id).text
 
 
-def _wait(predicate, timeout: float, what: str) -> None:  # noqa: ANN001
+def _wait(predicate, timeout: float, what: str) -> None:
     deadline = time.monotonic() + timeout
     while not predicate():
         if time.monotonic() > deadline:
@@ -83,7 +83,7 @@ def _wait(predicate, timeout: float, what: str) -> None:  # noqa: ANN001
 
 
 @pytest.fixture(scope="module")
-def live_run(tmp_path_factory: pytest.TempPathFactory, browser, compiled_kernels) -> dict:  # noqa: ANN001
+def live_run(tmp_path_factory: pytest.TempPathFactory, browser, compiled_kernels) -> dict:
     """A secured 2-taxi run watched live; what the page showed, the coordinator's result and its log."""
     from bus.certs import make_certs
 
@@ -147,7 +147,7 @@ def test_the_live_page_shows_the_coordinators_minute_and_fleet(live_run: dict) -
 
 
 @needs_browser
-def test_a_replay_plays_the_run_back_to_its_cost(live_run: dict, browser, tmp_path: Path) -> None:  # noqa: ANN001
+def test_a_replay_plays_the_run_back_to_its_cost(live_run: dict, browser, tmp_path: Path) -> None:
     result = live_run["result"]
     http = free_tcp_port()
     proc = _watch(["--replay", str(live_run["result_path"])], http)

@@ -9,9 +9,9 @@ import pytest
 
 distributed = pytest.importorskip("distributed")
 
-from city.errors import ConfigError  # noqa: E402
-from coordinator.cli import main  # noqa: E402
-from coordinator.experiments.evaluate import EvalConfig, evaluate  # noqa: E402
+from city.errors import ConfigError  # noqa: E402 - after the importorskip, so the module skips without dask
+from coordinator.cli import main  # noqa: E402 - after the importorskip, so the module skips without dask
+from coordinator.experiments.evaluate import EvalConfig, evaluate  # noqa: E402 - after the importorskip, so the module skips without dask
 
 POLICIES = ["greedy", "surge:forecast=true-rate,samples=16,horizon=3", "oracle"]
 SAME = ("hour", "seed", "policy", "total_cost", "served", "outstanding_end", "oracle_cost", "decisions_sha256")

@@ -12,7 +12,7 @@ from coordinator.cli import main
 from coordinator.experiments.results import RESULTS_SCHEMA
 
 
-def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: ANN001
+def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch) -> None:
     from coordinator.experiments.protocol import Run
 
     out = tmp_path / "r"
@@ -59,7 +59,7 @@ def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys, m
     assert not (out / "results-ablation.json").exists()
 
 
-def test_report_only_needs_the_main_results(tmp_path: Path, capsys) -> None:  # noqa: ANN001
+def test_report_only_needs_the_main_results(tmp_path: Path, capsys) -> None:
     assert main(["reproduce", "--smoke", "--out", str(tmp_path / "empty"), "--report-only"]) != 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "results-main.json: no results yet; run `surge reproduce` without --report-only" in err[0]
