@@ -137,6 +137,31 @@ def _walk(v: int, target: int, hops: int, hop_t: np.ndarray) -> int:
 
 
 @njit(cache=True)
+def _time_to_pickup(
+    v: int,
+    busy: int,
+    tail: int,
+    alive: np.ndarray,
+    act: np.ndarray,
+    n_act: int,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    e_pick: np.ndarray,
+    a_pick: np.ndarray,
+    dist: np.ndarray,
+    dist_t: np.ndarray,
+) -> int:
+    """Minutes until a taxi at node ``v`` after the horizon, busy ``busy`` more minutes, can stand at the nearest waiting request; at most ``tail``.
+
+    The nearest request is taken among those still waiting at the end of the
+    horizon (tracked and sampled arrivals), from ``v`` (the taxi's node, or
+    its drop-off when busy); with none, ``tail``.
+    """
+    d, _, _ = _nearest(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+    return min(tail, max(0, busy) + d)
+
+
+@njit(cache=True)
 def _simulate_greedy(
     horizon: int,
     alive: np.ndarray,
@@ -171,8 +196,13 @@ def _simulate_greedy(
     memo_d: np.ndarray,
     memo_c: np.ndarray,
     tick: np.ndarray,
-) -> tuple[int, int, int]:
-    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``(Σ g_k + g_H, T, events)``.
+    tail_ag: int = -1,
+    tail: int = 0,
+) -> tuple[int, int, int, int]:
+    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``(Σ g_k + g_H, T, events, a)``.
+
+    ``a`` is taxi ``tail_ag``'s time to its next pickup after the horizon
+    (:func:`_time_to_pickup`, at most ``tail``), or -1 when ``tail_ag < 0``.
 
     A free taxi heading for its nearest request keeps it as the nearest while
     it moves (the target gets exactly one hop closer, every other request at
@@ -312,7 +342,15 @@ def _simulate_greedy(
                         n_act -= 1
                         break
         cost += n_alive
-    return cost + n_alive, t_first, n_ev
+    a_end = -1
+    if tail_ag >= 0:
+        i = tail_ag
+        v = tpos[i]
+        c = tgt[i]
+        if tfree[i] <= horizon + 1 and c >= 0:
+            v = _walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(horizon + 1 - kanc[i], d0[i]), hop_t)
+        a_end = _time_to_pickup(v, tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+    return cost + n_alive, t_first, n_ev, a_end
 
 
 @njit(cache=True)
@@ -480,8 +518,12 @@ def _simulate_ia(
     target: np.ndarray,
     matched: np.ndarray,
     heap: np.ndarray,
-) -> int:
-    """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``Σ g_k + g_H``.
+    tail_ag: int = -1,
+    tail: int = 0,
+) -> tuple[int, int]:
+    """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``(Σ g_k + g_H, a)``.
+
+    ``a`` is as in :func:`_simulate_greedy`.
 
     Every step, :func:`agents.ia.ia_controls`: broadcast of local eligibility
     commits the globally closest (distance, taxi, request) pair, retires both,
@@ -573,4 +615,7 @@ def _simulate_ia(
                             n_act -= 1
                             break
         cost += n_alive
-    return cost + n_alive
+    a_end = -1
+    if tail_ag >= 0:
+        a_end = _time_to_pickup(tpos[tail_ag], tfree[tail_ag] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+    return cost + n_alive, a_end

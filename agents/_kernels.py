@@ -172,6 +172,24 @@ def _first_plans(
 
 
 @njit(cache=True)
+def _with_tail(path: int, alive: np.ndarray, n: int, a: int, tail: int, cycle: int) -> int:
+    """A rollout's cost with the fluid tail of ``tail`` minutes after the horizon, in units of ``1 / (2 cycle)`` request-minutes.
+
+    Past the horizon the requests still waiting (``g_H``, the alive flags of
+    ``alive[:n]``) wait ``tail`` more minutes, less what the deciding agent
+    serves: from ``a`` minutes on (:func:`agents._basesim._time_to_pickup`) it
+    picks up one request per ``cycle`` minutes, each sparing the rest of the
+    tail, ``Σ (tail - a - j cycle) ≈ (tail - a)² / (2 cycle)``.  The other
+    taxis' share is left out: the candidates change it only through the
+    agent.  Scaled by ``2 cycle`` to stay an integer.
+    """
+    g_end = 0
+    for r in range(n):
+        g_end += alive[r]
+    return 2 * cycle * (path + tail * g_end) - (tail - a) * (tail - a)
+
+
+@njit(cache=True)
 def _run_samples(
     lo: int,
     hi: int,
@@ -182,6 +200,8 @@ def _run_samples(
     shadow: np.ndarray,
     share: bool,
     ag: int,
+    tail: int,
+    cycle: int,
     plan_c: np.ndarray,
     plan_d: np.ndarray,
     base: int,
@@ -255,6 +275,7 @@ def _run_samples(
     memo_d = np.empty(n_memo, dtype=np.int64)
     memo_c = np.empty(n_memo, dtype=np.int64)
     tick = np.zeros(1, dtype=np.int64)
+    tail_ag = ag if tail > 0 else -1
     for s in range(lo, hi):
         n_arr = sample_arrivals(
             key, s, horizon, minute0, mode, sectors, eta, pk_ptr, pk_node, pk_cum,
@@ -291,22 +312,23 @@ def _run_samples(
                 rec_ag = ag if rec else -1
                 steps = ev_step if c == ref else no_ev
                 codes = ev_code if c == ref else no_code
-                cost, t_first, nev = _simulate_greedy(
+                cost, t_first, nev, a_end = _simulate_greedy(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t, act, target, seen, best_d, need, free,
                     plan_c[c], plan_d[c], rec_ag, rec_pos[c], rec_tgt[c], steps, codes, memo_key, memo_d, memo_c, tick,
+                    tail_ag, tail,
                 )
-                out[c, col] = g0 + cost
                 rec_t[c] = t_first
                 full[c] = rec
                 if c == ref:
                     n_ev = nev
             else:
-                out[c, col] = g0 + _simulate_ia(
+                cost, a_end = _simulate_ia(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t,
-                    act, lb, seen, free, best_d, best_c, target, matched, heap,
+                    act, lb, seen, free, best_d, best_c, target, matched, heap, tail_ag, tail,
                 )
+            out[c, col] = g0 + cost if tail_ag < 0 else _with_tail(g0 + cost, alive, r0 + n_arr, a_end, tail, cycle)
 
 
 @njit(cache=True, parallel=True, nogil=True)
@@ -319,6 +341,8 @@ def rollout_costs(
     shadow: np.ndarray,
     share: bool,
     ag: int,
+    tail: int,
+    cycle: int,
     key: np.uint64,
     minute0: int,
     mode: int,
@@ -389,7 +413,7 @@ def rollout_costs(
         for chunk in range(g * n_chunks // n_groups, (g + 1) * n_chunks // n_groups):
             _run_samples(
                 s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
-                active, shadow, share, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop,
+                active, shadow, share, ag, tail, cycle, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop,
                 lists, lists_d, rel_node, sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals,
                 dist, dist_t, hop_t,
             )
@@ -412,6 +436,8 @@ def rollout_costs_serial(
     shadow: np.ndarray,
     share: bool,
     ag: int,
+    tail: int,
+    cycle: int,
     key: np.uint64,
     minute0: int,
     mode: int,
@@ -447,7 +473,7 @@ def rollout_costs_serial(
     for chunk in range(n_chunks):
         _run_samples(
             s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
-            active, shadow, share, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
+            active, shadow, share, ag, tail, cycle, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
             sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals, dist, dist_t, hop_t,
         )
     return out, settled

@@ -7,7 +7,9 @@ after it the base policy's control for the current minute, and then the
 base policy runs for every taxi for ``H`` more minutes on requests sampled
 from the forecast.  The cost of a rollout is the sum of the stage costs (the
 requests outstanding after each minute) plus a terminal cost, the requests
-still outstanding at the end.  The agent takes the control of least Monte-Carlo
+still outstanding at the end; with ``tail`` (off by default) a fluid estimate
+of the waiting in the minutes after the horizon is added (:func:`agents._kernels._with_tail`).
+The agent takes the control of least Monte-Carlo
 mean cost; ties go to staying, then to pickup, then to the lowest node id.
 Busy taxis have a single control (their next hop) and are not planned.
 
@@ -209,7 +211,7 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
     if greedy and (sc.reach or sc.skip or capped):
         # Where a pickup can happen within the horizon: tracked requests and possible arrivals.
         spots = _pickup_spots(ctx, sectors, rel_node, req_pick[rel_req & alive0.any(axis=0)])
-        if sc.skip and PICKUP not in cands:
+        if sc.skip and PICKUP not in cands and not cfg.tail:
             skip = not K.reaches(cands, np.ones(cands.size, np.int64), spots, H, city.dist).any()
         if (sc.reach or capped) and not skip:
             others = taxis != agent
@@ -242,7 +244,8 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
         sectors.astype(np.int64), tab.eta, tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum,
         tab.beta_cum, _max_arrivals(tab.eta[sectors], mode, ctx.minute0, H), city.dist, dist_t, hop_t,
     )
-    shadow = (cands != PICKUP) & (sc.shadow and greedy)
+    # With a tail the agent's end position is part of every cost: no candidate's cost is another's.
+    shadow = (cands != PICKUP) & (sc.shadow and greedy and not cfg.tail)
     return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow))
 
 
@@ -286,7 +289,7 @@ def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarra
 def kernel_args(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray) -> tuple:
     """The arguments of either rollout kernel for samples ``s_lo … s_hi-1`` of a decision, all but the chunk count."""
     cfg = ctx.config
-    return (BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args)
+    return (BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, cfg.tail, cfg.cycle, *inp.args)
 
 
 def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np.ndarray, np.ndarray]:

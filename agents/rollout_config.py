@@ -55,6 +55,16 @@ class RolloutConfig:
         standard errors; the decision is the best of those left.
     batch : int
         Samples per batch of ``adaptive``.
+    tail : int
+        Minutes after the horizon valued by a fluid terminal cost (0, the
+        default, values none): the requests still waiting at the horizon wait
+        ``tail`` more minutes, less what the deciding agent serves from the
+        time it can reach the nearest of them, one per ``cycle`` minutes
+        (:func:`agents._kernels._with_tail`).  Sees past the horizon what the
+        base policy's end state is worth: a taxi left far from demand, or
+        busy long after the horizon, serves less.
+    cycle : int
+        Minutes per pickup of a taxi in the tail (trip plus approach).
     """
 
     horizon: int = 10
@@ -67,6 +77,8 @@ class RolloutConfig:
     cap: int | None = None
     adaptive: float | None = None
     batch: int = 100
+    tail: int = 0
+    cycle: int = 10
 
     def __post_init__(self) -> None:
         if self.horizon < 1 or self.samples < 1:
@@ -83,6 +95,8 @@ class RolloutConfig:
             raise ConfigError(f"rollout: cap must be at least 1 taxi, got {self.cap}")
         if self.adaptive is not None and not self.adaptive > 0:
             raise ConfigError(f"rollout: adaptive must be a positive number of standard errors, got {self.adaptive}")
+        if self.tail < 0 or self.cycle < 1:
+            raise ConfigError(f"rollout: tail must be non-negative and cycle at least 1 minute, got {self.tail} and {self.cycle}")
         if self.batch < 2:
             raise ConfigError(f"rollout: batch must be at least 2 samples, got {self.batch}")
 

@@ -1,0 +1,127 @@
+"""The rollout's fluid tail (``tail``): exact against the simulator, off by default, and the same decisions in every runner."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from agents import _kernels as K
+from agents.base import EpisodeContext, make_policy
+from agents.greedy import greedy_controls
+from agents.ia import ia_controls
+from agents.rollout import CE_MODES, agent_costs, candidate_controls, plan_agent
+from agents.rollout_config import RolloutConfig
+from city.errors import ConfigError
+from city.sim import FleetSim, Requests
+from coordinator.evaluate import run_episode
+from tests.test_rollout import DATE, StubWorld, context, grid_city, random_state, uniform_forecast
+
+
+def reference_tail_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
+    """Every candidate's cost by the simulator with the real base policy, plus the tail from the simulated end state.
+
+    The tail (:func:`agents._kernels._with_tail`): ``2 cycle (Σ g + tail g_H) - (tail - a)²`` with ``a``
+    the agent's busy minutes left after the horizon plus its hops from its node (its drop-off when
+    busy) to the nearest request still waiting, at most ``tail``.
+    """
+    city, cfg, obs = ctx.city, ctx.config, ctx.obs
+    here = int(obs.pos[agent])
+    sectors = city.local_sectors(int(city.node_sector[here])) if cfg.scope == "local" else np.arange(city.n_sectors)
+    tab = ctx.tables
+    key = np.uint64(K.stream_key(cfg.seed, int(obs.t), agent))
+    base = greedy_controls if cfg.base == "greedy" else ia_controls
+    cands = candidate_controls(city, obs, agent)
+    out = np.zeros((cands.size, cfg.samples), dtype=np.int64)
+    for s in range(cfg.samples):
+        ap, ad, ast = (np.empty(4096, np.int32) for _ in range(3))
+        n = K.sample_arrivals(key, s, cfg.horizon, ctx.minute0, CE_MODES[cfg.ce], sectors.astype(np.int64), tab.eta,
+                              tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum, tab.beta_cum,
+                              np.ones(city.n_nodes, dtype=bool), ap, ad, ast)
+        reqs = Requests(np.concatenate([obs.req_pickup, ap[:n]]), np.concatenate([obs.req_dropoff, ad[:n]]),
+                        np.concatenate([obs.req_entry, obs.t + ast[:n]]))
+        for c, u in enumerate(cands):
+            sim = FleetSim(city, reqs, obs.pos)
+            sim.state.t, sim.state.tau, sim.state.dest = obs.t, obs.tau.copy(), obs.dest.copy()
+            joint = ctx.base_controls.copy()
+            joint[:agent] = committed
+            joint[agent] = u
+            g = total = sim.step(joint)
+            for _ in range(cfg.horizon):
+                g = sim.step(base(city, sim.observe()))
+                total += g
+            total += g
+            st = sim.state
+            busy = int(st.tau[agent])
+            v = int(st.dest[agent]) if busy else int(st.pos[agent])
+            waiting = reqs.pickup[sim.outstanding()]
+            d = int(city.dist[v, waiting].min()) if waiting.size else cfg.tail
+            a = min(cfg.tail, busy + d)
+            out[c, s] = 2 * cfg.cycle * (total + cfg.tail * g) - (cfg.tail - a) ** 2
+    return out
+
+
+@pytest.mark.parametrize("base,ce,scope", [("greedy", "limited", "local"), ("ia", "standard", "map"), ("greedy", "standard", "map"),
+                                           ("ia", "limited", "local")])
+def test_rollout_costs_with_a_tail_equal_the_simulator(base: str, ce: str, scope: str) -> None:
+    city = grid_city(5, 4)
+    fc = uniform_forecast(city, [0.6, 1.4, 0.2, 2.0])
+    checked = 0
+    for seed in range(3):
+        obs = random_state(city, np.random.default_rng(seed), taxis=6, requests=7)
+        ctx = context(city, obs, fc, horizon=4, samples=12, base=base, ce=ce, scope=scope, seed=seed, tail=9, cycle=4)
+        u = ctx.base_controls.copy()
+        for agent in np.flatnonzero(obs.tau == 0):
+            cands, costs = agent_costs(ctx, u[:agent], int(agent))
+            ref = reference_tail_costs(ctx, u[:agent], int(agent))
+            np.testing.assert_array_equal(costs, ref)
+            best = plan_agent(ctx, u[:agent], int(agent))
+            totals = ref.sum(axis=1)
+            assert best == cands[int(np.flatnonzero(totals == totals.min())[0])]
+            u[agent] = best
+            checked += int(np.ptp(ref) > 0)
+    assert checked > 0
+
+
+def test_the_tail_moves_a_taxi_towards_requests_beyond_the_horizon() -> None:
+    # A line: the taxi at 0, requests waiting at 12 and 13; with H = 3 no pickup is reachable, so
+    # without a tail every control costs the same and the taxi stays; the tail sends it towards them.
+    city = grid_city(16, 1, 2, 1)
+    fc = uniform_forecast(city, [0.0, 0.0])
+    from city.sim import Observation
+
+    obs = Observation(5, np.array([0], np.int32), np.zeros(1, np.int32), np.full(1, -1, np.int32), np.arange(2),
+                      np.array([12, 13], np.int32), np.array([15, 14], np.int32), np.array([1, 2], np.int32))
+    plain = context(city, obs, fc, horizon=3, samples=4, seed=1)
+    tailed = dataclasses.replace(plain, config=dataclasses.replace(plain.config, tail=20))
+    none = np.empty(0, np.int32)
+    assert plan_agent(plain, none, 0) == 0
+    assert plan_agent(tailed, none, 0) == 1
+
+
+def test_tail_is_off_by_default_and_checked() -> None:
+    assert RolloutConfig().tail == 0
+    city = grid_city(4, 4)
+    assert make_policy("surge", city, forecast="true-rate").config.tail == 0
+    assert make_policy("surge", city, forecast="true-rate", tail=30, cycle=8).config == dataclasses.replace(
+        make_policy("surge", city, forecast="true-rate").config, tail=30, cycle=8)
+    with pytest.raises(ConfigError, match="cycle at least 1"):
+        RolloutConfig(tail=5, cycle=0)
+
+
+@pytest.mark.parametrize("options", [{"tail": 20}, {"tail": 20, "base": "ia", "adaptive": None}])
+def test_same_seed_same_decisions_with_a_tail(options: dict) -> None:
+    city = grid_city(6, 6)
+    world = StubWorld(city, 20.0)
+    rng = np.random.default_rng(11)
+    n_req = 40
+    reqs = Requests.sorted(rng.integers(0, 36, n_req), rng.integers(0, 36, n_req), rng.integers(0, 12, n_req))
+    start = rng.integers(0, 36, 7).astype(np.int32)
+    ctx = EpisodeContext(city=city, date=DATE, hour=19, minutes=12, seed=0, world=world)
+    runs = [run_episode(city, make_policy("surge", city, forecast="true-rate", horizon=4, samples=50, seed=5, **options), reqs, start, ctx)
+            for _ in range(2)]
+    plain = run_episode(city, make_policy("surge", city, forecast="true-rate", horizon=4, samples=50, seed=5), reqs, start, ctx)
+    assert runs[0].decisions_sha256 == runs[1].decisions_sha256
+    assert runs[0].total_cost == runs[1].total_cost
+    assert plain.decisions_sha256 != runs[0].decisions_sha256  # the tail changes what is decided
