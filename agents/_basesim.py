@@ -196,13 +196,12 @@ def _simulate_greedy(
     memo_d: np.ndarray,
     memo_c: np.ndarray,
     tick: np.ndarray,
-    tail_ag: int = -1,
     tail: int = 0,
 ) -> tuple[int, int, int, int]:
-    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``(Σ g_k + g_H, T, events, a)``.
+    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``(Σ g_k + g_H, T, events, spared)``.
 
-    ``a`` is taxi ``tail_ag``'s time to its next pickup after the horizon
-    (:func:`_time_to_pickup`, at most ``tail``), or -1 when ``tail_ag < 0``.
+    With ``tail > 0``, ``spared`` is ``Σ_i (tail - a_i)²`` over the taxis, ``a_i`` taxi i's
+    time to its next pickup after the horizon (:func:`_time_to_pickup`); 0 otherwise.
 
     A free taxi heading for its nearest request keeps it as the nearest while
     it moves (the target gets exactly one hop closer, every other request at
@@ -342,15 +341,16 @@ def _simulate_greedy(
                         n_act -= 1
                         break
         cost += n_alive
-    a_end = -1
-    if tail_ag >= 0:
-        i = tail_ag
-        v = tpos[i]
-        c = tgt[i]
-        if tfree[i] <= horizon + 1 and c >= 0:
-            v = _walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(horizon + 1 - kanc[i], d0[i]), hop_t)
-        a_end = _time_to_pickup(v, tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
-    return cost + n_alive, t_first, n_ev, a_end
+    spared = 0
+    if tail > 0:
+        for i in range(mt):
+            v = tpos[i]
+            c = tgt[i]
+            if tfree[i] <= horizon + 1 and c >= 0:
+                v = _walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(horizon + 1 - kanc[i], d0[i]), hop_t)
+            a = _time_to_pickup(v, tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+            spared += (tail - a) * (tail - a)
+    return cost + n_alive, t_first, n_ev, spared
 
 
 @njit(cache=True)
@@ -518,12 +518,11 @@ def _simulate_ia(
     target: np.ndarray,
     matched: np.ndarray,
     heap: np.ndarray,
-    tail_ag: int = -1,
     tail: int = 0,
 ) -> tuple[int, int]:
-    """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``(Σ g_k + g_H, a)``.
+    """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``(Σ g_k + g_H, spared)``.
 
-    ``a`` is as in :func:`_simulate_greedy`.
+    ``spared`` is as in :func:`_simulate_greedy`.
 
     Every step, :func:`agents.ia.ia_controls`: broadcast of local eligibility
     commits the globally closest (distance, taxi, request) pair, retires both,
@@ -615,7 +614,9 @@ def _simulate_ia(
                             n_act -= 1
                             break
         cost += n_alive
-    a_end = -1
-    if tail_ag >= 0:
-        a_end = _time_to_pickup(tpos[tail_ag], tfree[tail_ag] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
-    return cost + n_alive, a_end
+    spared = 0
+    if tail > 0:
+        for i in range(mt):
+            a = _time_to_pickup(tpos[i], tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+            spared += (tail - a) * (tail - a)
+    return cost + n_alive, spared

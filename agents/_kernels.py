@@ -172,21 +172,22 @@ def _first_plans(
 
 
 @njit(cache=True)
-def _with_tail(path: int, alive: np.ndarray, n: int, a: int, tail: int, cycle: int) -> int:
+def _with_tail(path: int, alive: np.ndarray, n: int, spared: int, tail: int, cycle: int) -> int:
     """A rollout's cost with the fluid tail of ``tail`` minutes after the horizon, in units of ``1 / (2 cycle)`` request-minutes.
 
     Past the horizon the requests still waiting (``g_H``, the alive flags of
-    ``alive[:n]``) wait ``tail`` more minutes, less what the deciding agent
-    serves: from ``a`` minutes on (:func:`agents._basesim._time_to_pickup`) it
-    picks up one request per ``cycle`` minutes, each sparing the rest of the
-    tail, ``Σ (tail - a - j cycle) ≈ (tail - a)² / (2 cycle)``.  The other
-    taxis' share is left out: the candidates change it only through the
-    agent.  Scaled by ``2 cycle`` to stay an integer.
+    ``alive[:n]``) wait ``tail`` more minutes, less what the taxis serve:
+    taxi i, from ``a_i`` minutes on (the time it needs to stand at the
+    nearest of them, :func:`agents._basesim._time_to_pickup`), picks up one
+    per ``cycle`` minutes, each sparing the rest of the tail,
+    ``Σ_j (tail - a_i - j cycle) ≈ (tail - a_i)² / (2 cycle)``; ``spared`` is
+    ``Σ_i (tail - a_i)²`` over the simulated taxis.  Scaled by ``2 cycle`` to
+    stay an integer.
     """
     g_end = 0
     for r in range(n):
         g_end += alive[r]
-    return 2 * cycle * (path + tail * g_end) - (tail - a) * (tail - a)
+    return 2 * cycle * (path + tail * g_end) - spared
 
 
 @njit(cache=True)
@@ -275,7 +276,6 @@ def _run_samples(
     memo_d = np.empty(n_memo, dtype=np.int64)
     memo_c = np.empty(n_memo, dtype=np.int64)
     tick = np.zeros(1, dtype=np.int64)
-    tail_ag = ag if tail > 0 else -1
     for s in range(lo, hi):
         n_arr = sample_arrivals(
             key, s, horizon, minute0, mode, sectors, eta, pk_ptr, pk_node, pk_cum,
@@ -312,23 +312,23 @@ def _run_samples(
                 rec_ag = ag if rec else -1
                 steps = ev_step if c == ref else no_ev
                 codes = ev_code if c == ref else no_code
-                cost, t_first, nev, a_end = _simulate_greedy(
+                cost, t_first, nev, spared = _simulate_greedy(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t, act, target, seen, best_d, need, free,
                     plan_c[c], plan_d[c], rec_ag, rec_pos[c], rec_tgt[c], steps, codes, memo_key, memo_d, memo_c, tick,
-                    tail_ag, tail,
+                    tail,
                 )
                 rec_t[c] = t_first
                 full[c] = rec
                 if c == ref:
                     n_ev = nev
             else:
-                cost, a_end = _simulate_ia(
+                cost, spared = _simulate_ia(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t,
-                    act, lb, seen, free, best_d, best_c, target, matched, heap, tail_ag, tail,
+                    act, lb, seen, free, best_d, best_c, target, matched, heap, tail,
                 )
-            out[c, col] = g0 + cost if tail_ag < 0 else _with_tail(g0 + cost, alive, r0 + n_arr, a_end, tail, cycle)
+            out[c, col] = g0 + cost if tail == 0 else _with_tail(g0 + cost, alive, r0 + n_arr, spared, tail, cycle)
 
 
 @njit(cache=True, parallel=True, nogil=True)

@@ -208,10 +208,11 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
     taxis = np.flatnonzero(keep)
     useful = np.ones(taxis.size, dtype=bool)
     capped = cfg.cap is not None and taxis.size > cfg.cap
-    if greedy and (sc.reach or sc.skip or capped):
+    # With a tail every simulated taxi's end position is part of the cost: none is left out for not reaching a pickup.
+    if greedy and not cfg.tail and (sc.reach or sc.skip or capped):
         # Where a pickup can happen within the horizon: tracked requests and possible arrivals.
         spots = _pickup_spots(ctx, sectors, rel_node, req_pick[rel_req & alive0.any(axis=0)])
-        if sc.skip and PICKUP not in cands and not cfg.tail:
+        if sc.skip and PICKUP not in cands:
             skip = not K.reaches(cands, np.ones(cands.size, np.int64), spots, H, city.dist).any()
         if (sc.reach or capped) and not skip:
             others = taxis != agent

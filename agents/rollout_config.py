@@ -58,11 +58,13 @@ class RolloutConfig:
     tail : int
         Minutes after the horizon valued by a fluid terminal cost (0, the
         default, values none): the requests still waiting at the horizon wait
-        ``tail`` more minutes, less what the deciding agent serves from the
-        time it can reach the nearest of them, one per ``cycle`` minutes
+        ``tail`` more minutes, less what the simulated taxis serve, each from
+        the time it can reach the nearest of them, one per ``cycle`` minutes
         (:func:`agents._kernels._with_tail`).  Sees past the horizon what the
         base policy's end state is worth: a taxi left far from demand, or
-        busy long after the horizon, serves less.
+        busy long after the horizon, serves less.  With a tail the exact
+        shortcuts that leave out taxis unable to pick up, or replay the agent
+        alone, are off.
     cycle : int
         Minutes per pickup of a taxi in the tail (trip plus approach).
     """

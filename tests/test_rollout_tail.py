@@ -22,9 +22,10 @@ from tests.test_rollout import DATE, StubWorld, context, grid_city, random_state
 def reference_tail_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
     """Every candidate's cost by the simulator with the real base policy, plus the tail from the simulated end state.
 
-    The tail (:func:`agents._kernels._with_tail`): ``2 cycle (Σ g + tail g_H) - (tail - a)²`` with ``a``
-    the agent's busy minutes left after the horizon plus its hops from its node (its drop-off when
-    busy) to the nearest request still waiting, at most ``tail``.
+    The tail (:func:`agents._kernels._with_tail`): ``2 cycle (Σ g + tail g_H) - Σ_i (tail - a_i)²`` over the
+    taxis the rollout simulates (free at some step of the horizon in some candidate), ``a_i`` taxi i's busy
+    minutes left after the horizon plus its hops from its node (its drop-off when busy) to the nearest
+    request still waiting, at most ``tail``.
     """
     city, cfg, obs = ctx.city, ctx.config, ctx.obs
     here = int(obs.pos[agent])
@@ -33,6 +34,11 @@ def reference_tail_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
     key = np.uint64(K.stream_key(cfg.seed, int(obs.t), agent))
     base = greedy_controls if cfg.base == "greedy" else ia_controls
     cands = candidate_controls(city, obs, agent)
+    joints = np.repeat(ctx.base_controls[None, :], cands.size, axis=0)
+    joints[:, :agent] = committed
+    joints[:, agent] = cands
+    _, _, tfree1 = K.step_zero(joints, obs.pos, obs.tau, obs.dest, obs.req_pickup, obs.req_dropoff, city.dist)
+    simulated = np.flatnonzero(tfree1.min(axis=0) <= cfg.horizon)
     out = np.zeros((cands.size, cfg.samples), dtype=np.int64)
     for s in range(cfg.samples):
         ap, ad, ast = (np.empty(4096, np.int32) for _ in range(3))
@@ -41,24 +47,23 @@ def reference_tail_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
                               np.ones(city.n_nodes, dtype=bool), ap, ad, ast)
         reqs = Requests(np.concatenate([obs.req_pickup, ap[:n]]), np.concatenate([obs.req_dropoff, ad[:n]]),
                         np.concatenate([obs.req_entry, obs.t + ast[:n]]))
-        for c, u in enumerate(cands):
+        for c, joint in enumerate(joints):
             sim = FleetSim(city, reqs, obs.pos)
             sim.state.t, sim.state.tau, sim.state.dest = obs.t, obs.tau.copy(), obs.dest.copy()
-            joint = ctx.base_controls.copy()
-            joint[:agent] = committed
-            joint[agent] = u
             g = total = sim.step(joint)
             for _ in range(cfg.horizon):
                 g = sim.step(base(city, sim.observe()))
                 total += g
             total += g
             st = sim.state
-            busy = int(st.tau[agent])
-            v = int(st.dest[agent]) if busy else int(st.pos[agent])
             waiting = reqs.pickup[sim.outstanding()]
-            d = int(city.dist[v, waiting].min()) if waiting.size else cfg.tail
-            a = min(cfg.tail, busy + d)
-            out[c, s] = 2 * cfg.cycle * (total + cfg.tail * g) - (cfg.tail - a) ** 2
+            spared = 0
+            for i in simulated:
+                busy = int(st.tau[i])
+                v = int(st.dest[i]) if busy else int(st.pos[i])
+                d = int(city.dist[v, waiting].min()) if waiting.size else cfg.tail
+                spared += (cfg.tail - min(cfg.tail, busy + d)) ** 2
+            out[c, s] = 2 * cfg.cycle * (total + cfg.tail * g) - spared
     return out
 
 
@@ -125,3 +130,34 @@ def test_same_seed_same_decisions_with_a_tail(options: dict) -> None:
     assert runs[0].decisions_sha256 == runs[1].decisions_sha256
     assert runs[0].total_cost == runs[1].total_cost
     assert plain.decisions_sha256 != runs[0].decisions_sha256  # the tail changes what is decided
+
+
+def test_exact_shortcuts_change_no_decision_with_a_tail() -> None:
+    """Every shortcut left on with a tail (the skip and the shadow replays switch off) keeps the decisions of none."""
+    from city.scenario import load_city
+    from tests.test_planning_speed import shortcuts_settled
+
+    shortcuts_settled(load_city("synthetic"), range(1), tail=20, cycle=8, cap=6)
+
+
+def test_waves_match_sequential_turns_with_a_tail() -> None:
+    from agents.rollout import DemandTables, prepare_step
+    from agents.rollout_config import default_prune
+    from agents.waves import plan_waves
+    from city.scenario import load_city
+    from tests.test_planning_speed import H, SAMPLES, forecast, seeded_state
+
+    city = load_city("synthetic")
+    obs = seeded_state(city, 7, taxis=80)
+    fc = forecast(city, np.random.default_rng(7))
+    config = RolloutConfig(horizon=H, samples=SAMPLES, prune=default_prune(H), seed=1, adaptive=2.0, batch=16, cap=24, tail=20)
+    ctx = prepare_step(city, config, obs, DemandTables.build(city, fc, config.ce, config.seed), obs.t % 60)
+    sequential = ctx.base_controls.copy()
+    for agent in np.flatnonzero(obs.tau == 0):
+        sequential[agent] = plan_agent(ctx, sequential[:agent], int(agent))
+    assert plan_waves(city, obs, config.prune).critical_path < np.flatnonzero(obs.tau == 0).size
+    policy = make_policy("surge", city, forecast="true-rate", workers=2, horizon=H, samples=SAMPLES, seed=1, batch=16, tail=20)
+    assert policy.config == config
+    u = ctx.base_controls.copy()
+    policy._act_waves(ctx, u)
+    np.testing.assert_array_equal(u, sequential)
