@@ -197,11 +197,15 @@ def _simulate_greedy(
     memo_c: np.ndarray,
     tick: np.ndarray,
     tail: int = 0,
+    place: np.ndarray = np.empty(0, dtype=np.int64),
 ) -> tuple[int, int, int, int]:
-    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``(Σ g_k + g_H, T, events, spared)``.
+    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``(Σ g_k + g_H, T, events, end)``.
 
-    With ``tail > 0``, ``spared`` is ``Σ_i (tail - a_i)²`` over the taxis, ``a_i`` taxi i's
-    time to its next pickup after the horizon (:func:`_time_to_pickup`); 0 otherwise.
+    ``end`` values the taxis' state after the horizon: with ``tail > 0``,
+    ``Σ_i (tail - a_i)²``, ``a_i`` taxi i's time to its next pickup
+    (:func:`_time_to_pickup`); else with ``place`` (one value per node),
+    ``Σ_i place[v_i]`` over the taxis free after the horizon, ``v_i`` taxi i's
+    node (a busy taxi's drop-off is the request's, not a choice); else 0.
 
     A free taxi heading for its nearest request keeps it as the nearest while
     it moves (the target gets exactly one hop closer, every other request at
@@ -342,14 +346,17 @@ def _simulate_greedy(
                         break
         cost += n_alive
     spared = 0
-    if tail > 0:
+    if tail > 0 or place.shape[0] > 0:
         for i in range(mt):
             v = tpos[i]
             c = tgt[i]
             if tfree[i] <= horizon + 1 and c >= 0:
                 v = _walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(horizon + 1 - kanc[i], d0[i]), hop_t)
-            a = _time_to_pickup(v, tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
-            spared += (tail - a) * (tail - a)
+            if tail > 0:
+                a = _time_to_pickup(v, tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                spared += (tail - a) * (tail - a)
+            elif tfree[i] <= horizon + 1:
+                spared += place[v]
     return cost + n_alive, t_first, n_ev, spared
 
 
@@ -519,10 +526,11 @@ def _simulate_ia(
     matched: np.ndarray,
     heap: np.ndarray,
     tail: int = 0,
+    place: np.ndarray = np.empty(0, dtype=np.int64),
 ) -> tuple[int, int]:
-    """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``(Σ g_k + g_H, spared)``.
+    """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``(Σ g_k + g_H, end)``.
 
-    ``spared`` is as in :func:`_simulate_greedy`.
+    ``end`` is as in :func:`_simulate_greedy`.
 
     Every step, :func:`agents.ia.ia_controls`: broadcast of local eligibility
     commits the globally closest (distance, taxi, request) pair, retires both,
@@ -619,4 +627,8 @@ def _simulate_ia(
         for i in range(mt):
             a = _time_to_pickup(tpos[i], tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
             spared += (tail - a) * (tail - a)
+    elif place.shape[0] > 0:
+        for i in range(mt):
+            if tfree[i] <= horizon + 1:
+                spared += place[tpos[i]]
     return cost + n_alive, spared

@@ -171,6 +171,10 @@ def _first_plans(
     return plan_c, plan_d
 
 
+#: Units per request-minute of a rollout's cost with ``place``: the place values are tenths of a hop.
+PLACE_SCALE = 10
+
+
 @njit(cache=True)
 def _with_tail(path: int, alive: np.ndarray, n: int, spared: int, tail: int, cycle: int) -> int:
     """A rollout's cost with the fluid tail of ``tail`` minutes after the horizon, in units of ``1 / (2 cycle)`` request-minutes.
@@ -203,6 +207,8 @@ def _run_samples(
     ag: int,
     tail: int,
     cycle: int,
+    place_w: int,
+    place: np.ndarray,
     plan_c: np.ndarray,
     plan_d: np.ndarray,
     base: int,
@@ -316,7 +322,7 @@ def _run_samples(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t, act, target, seen, best_d, need, free,
                     plan_c[c], plan_d[c], rec_ag, rec_pos[c], rec_tgt[c], steps, codes, memo_key, memo_d, memo_c, tick,
-                    tail,
+                    tail, place,
                 )
                 rec_t[c] = t_first
                 full[c] = rec
@@ -326,9 +332,14 @@ def _run_samples(
                 cost, spared = _simulate_ia(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t,
-                    act, lb, seen, free, best_d, best_c, target, matched, heap, tail,
+                    act, lb, seen, free, best_d, best_c, target, matched, heap, tail, place,
                 )
-            out[c, col] = g0 + cost if tail == 0 else _with_tail(g0 + cost, alive, r0 + n_arr, spared, tail, cycle)
+            if tail > 0:
+                out[c, col] = _with_tail(g0 + cost, alive, r0 + n_arr, spared, tail, cycle)
+            elif place.shape[0] > 0:
+                out[c, col] = PLACE_SCALE * (g0 + cost) + place_w * spared
+            else:
+                out[c, col] = g0 + cost
 
 
 @njit(cache=True, parallel=True, nogil=True)
@@ -343,6 +354,8 @@ def rollout_costs(
     ag: int,
     tail: int,
     cycle: int,
+    place_w: int,
+    place: np.ndarray,
     key: np.uint64,
     minute0: int,
     mode: int,
@@ -413,7 +426,7 @@ def rollout_costs(
         for chunk in range(g * n_chunks // n_groups, (g + 1) * n_chunks // n_groups):
             _run_samples(
                 s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
-                active, shadow, share, ag, tail, cycle, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop,
+                active, shadow, share, ag, tail, cycle, place_w, place, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop,
                 lists, lists_d, rel_node, sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals,
                 dist, dist_t, hop_t,
             )
@@ -438,6 +451,8 @@ def rollout_costs_serial(
     ag: int,
     tail: int,
     cycle: int,
+    place_w: int,
+    place: np.ndarray,
     key: np.uint64,
     minute0: int,
     mode: int,
@@ -473,7 +488,7 @@ def rollout_costs_serial(
     for chunk in range(n_chunks):
         _run_samples(
             s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
-            active, shadow, share, ag, tail, cycle, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
+            active, shadow, share, ag, tail, cycle, place_w, place, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
             sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals, dist, dist_t, hop_t,
         )
     return out, settled

@@ -8,7 +8,8 @@ base policy runs for every taxi for ``H`` more minutes on requests sampled
 from the forecast.  The cost of a rollout is the sum of the stage costs (the
 requests outstanding after each minute) plus a terminal cost, the requests
 still outstanding at the end; with ``tail`` (off by default) a fluid estimate
-of the waiting in the minutes after the horizon is added (:func:`agents._kernels._with_tail`).
+of the waiting in the minutes after the horizon is added (:func:`agents._kernels._with_tail`),
+or with ``place`` the taxis' expected distance to the forecast's next request (:func:`place_values`).
 The agent takes the control of least Monte-Carlo
 mean cost; ties go to staying, then to pickup, then to the lowest node id.
 Busy taxis have a single control (their next hop) and are not planned.
@@ -171,6 +172,7 @@ class _Inputs:
     args: tuple
     ag: int
     shadow: np.ndarray
+    place: np.ndarray
 
 
 def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _Inputs:
@@ -208,8 +210,9 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
     taxis = np.flatnonzero(keep)
     useful = np.ones(taxis.size, dtype=bool)
     capped = cfg.cap is not None and taxis.size > cfg.cap
-    # With a tail every simulated taxi's end position is part of the cost: none is left out for not reaching a pickup.
-    if greedy and not cfg.tail and (sc.reach or sc.skip or capped):
+    # With a tail or place values every simulated taxi's end position is part of the cost: none is left out
+    # for not reaching a pickup.
+    if greedy and not cfg.tail and not cfg.place and (sc.reach or sc.skip or capped):
         # Where a pickup can happen within the horizon: tracked requests and possible arrivals.
         spots = _pickup_spots(ctx, sectors, rel_node, req_pick[rel_req & alive0.any(axis=0)])
         if sc.skip and PICKUP not in cands:
@@ -246,8 +249,40 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
         tab.beta_cum, _max_arrivals(tab.eta[sectors], mode, ctx.minute0, H), city.dist, dist_t, hop_t,
     )
     # With a tail the agent's end position is part of every cost: no candidate's cost is another's.
-    shadow = (cands != PICKUP) & (sc.shadow and greedy and not cfg.tail)
-    return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow))
+    shadow = (cands != PICKUP) & (sc.shadow and greedy and not cfg.tail and not cfg.place)
+    place = place_values(city, tab, sectors) if cfg.place else _NO_PLACE
+    return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow), place=place)
+
+
+_NO_PLACE = np.empty(0, dtype=np.int64)
+_PLACES: dict[tuple[int, int, bytes], tuple[object, np.ndarray]] = {}
+
+
+def place_values(city: City, tables: DemandTables, sectors: np.ndarray) -> np.ndarray:
+    """Per node, the expected hops (in tenths, rounded) to the next request forecast in ``sectors``.
+
+    A request of sector ``q`` comes with probability ``η_q / Σ η`` and its
+    pickup node from the sector's pickup table; without demand, zeros.  Kept
+    per (city, tables, sectors): the tables change with the forecast's hour only.
+    """
+    key = (id(city), id(tables), sectors.tobytes())
+    hit = _PLACES.get(key)
+    if hit is not None and hit[0] is tables:
+        return hit[1]
+    eta = tables.eta[sectors]
+    values = np.zeros(city.n_nodes)
+    if eta.sum() > 0:
+        for q, rate in zip(sectors.tolist(), eta.tolist()):
+            lo, hi = int(tables.pk_ptr[q]), int(tables.pk_ptr[q + 1])
+            if rate <= 0 or hi == lo:
+                continue
+            w = np.diff(tables.pk_cum[lo:hi], prepend=0.0)
+            values += (rate / eta.sum()) * (city.dist[:, tables.pk_node[lo:hi]] @ (w / w.sum()))
+    out = np.ascontiguousarray(np.rint(10.0 * values), dtype=np.int64)
+    if len(_PLACES) > 512:
+        _PLACES.clear()
+    _PLACES[key] = (tables, out)
+    return out
 
 
 def cap_ranking(city: City, obs: Observation, here: int, taxis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -290,7 +325,7 @@ def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarra
 def kernel_args(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray) -> tuple:
     """The arguments of either rollout kernel for samples ``s_lo … s_hi-1`` of a decision, all but the chunk count."""
     cfg = ctx.config
-    return (BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, cfg.tail, cfg.cycle, *inp.args)
+    return (BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, cfg.tail, cfg.cycle, cfg.place, inp.place, *inp.args)
 
 
 def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np.ndarray, np.ndarray]:

@@ -67,6 +67,14 @@ class RolloutConfig:
         alone, are off.
     cycle : int
         Minutes per pickup of a taxi in the tail (trip plus approach).
+    place : int
+        Request-minutes per hop that each simulated taxi free after the
+        horizon costs where it stands, by its expected hops to the next request
+        forecast in the sampled sectors (:func:`agents.rollout.place_values`);
+        0, the default, values none.  Rewards ending the horizon where the
+        forecast puts demand.  An alternative to ``tail``; with either the
+        exact shortcuts that leave out taxis unable to pick up, or replay the
+        agent alone, are off.
     """
 
     horizon: int = 10
@@ -81,6 +89,7 @@ class RolloutConfig:
     batch: int = 100
     tail: int = 0
     cycle: int = 10
+    place: int = 0
 
     def __post_init__(self) -> None:
         if self.horizon < 1 or self.samples < 1:
@@ -99,6 +108,10 @@ class RolloutConfig:
             raise ConfigError(f"rollout: adaptive must be a positive number of standard errors, got {self.adaptive}")
         if self.tail < 0 or self.cycle < 1:
             raise ConfigError(f"rollout: tail must be non-negative and cycle at least 1 minute, got {self.tail} and {self.cycle}")
+        if self.place < 0:
+            raise ConfigError(f"rollout: place must be non-negative, got {self.place}")
+        if self.place and self.tail:
+            raise ConfigError("rollout: tail and place are alternatives; set one of them")
         if self.batch < 2:
             raise ConfigError(f"rollout: batch must be at least 2 samples, got {self.batch}")
 

@@ -96,6 +96,7 @@ class RolloutPolicy(Policy):
         Option("batch", int, low=2, help="samples per batch of adaptive"),
         Option("tail", int, low=0, high=240, help="minutes after the horizon valued by a fluid terminal cost (0: none)"),
         Option("cycle", int, low=1, high=240, help="minutes per pickup of a taxi in the tail"),
+        Option("place", int, low=0, high=1000, help="request-minutes per hop of the taxis' end distance to forecast demand (0: none)"),
         Option("workers", int, low=1, help="threads planning independent agents of a minute concurrently"),
     )
     shortcuts: Shortcuts = Shortcuts()
@@ -132,6 +133,7 @@ class RolloutPolicy(Policy):
         batch: int | None = None,
         tail: int | None = None,
         cycle: int | None = None,
+        place: int | None = None,
     ) -> RolloutConfig:
         """The planner settings of this policy with the options not given at its defaults; no forecast is loaded.
 
@@ -155,6 +157,7 @@ class RolloutPolicy(Policy):
             batch=int(batch if batch is not None else d["batch"]),
             tail=int(tail if tail is not None else d.get("tail", 0)),
             cycle=int(cycle if cycle is not None else d.get("cycle", 10)),
+            place=int(place if place is not None else d.get("place", 0)),
         )
 
     def reset(self, context: EpisodeContext) -> None:

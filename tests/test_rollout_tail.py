@@ -1,4 +1,4 @@
-"""The rollout's fluid tail (``tail``): exact against the simulator, off by default, and the same decisions in every runner."""
+"""The rollout's values of the state after the horizon (``tail``, ``place``): exact against the simulator, off by default, and the same decisions in every runner."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ from agents import _kernels as K
 from agents.base import EpisodeContext, make_policy
 from agents.greedy import greedy_controls
 from agents.ia import ia_controls
-from agents.rollout import CE_MODES, agent_costs, candidate_controls, plan_agent
+from agents._kernels import PLACE_SCALE
+from agents.rollout import CE_MODES, agent_costs, candidate_controls, place_values, plan_agent
 from agents.rollout_config import RolloutConfig
 from city.errors import ConfigError
 from city.sim import FleetSim, Requests
@@ -25,7 +26,8 @@ def reference_tail_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
     The tail (:func:`agents._kernels._with_tail`): ``2 cycle (Σ g + tail g_H) - Σ_i (tail - a_i)²`` over the
     taxis the rollout simulates (free at some step of the horizon in some candidate), ``a_i`` taxi i's busy
     minutes left after the horizon plus its hops from its node (its drop-off when busy) to the nearest
-    request still waiting, at most ``tail``.
+    request still waiting, at most ``tail``.  With ``place``: ``10 Σ g + place Σ_i V(v_i)``, ``V`` the place
+    values (:func:`agents.rollout.place_values`) and ``v_i`` the node of taxi i, over the taxis free after the horizon.
     """
     city, cfg, obs = ctx.city, ctx.config, ctx.obs
     here = int(obs.pos[agent])
@@ -39,6 +41,7 @@ def reference_tail_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
     joints[:, agent] = cands
     _, _, tfree1 = K.step_zero(joints, obs.pos, obs.tau, obs.dest, obs.req_pickup, obs.req_dropoff, city.dist)
     simulated = np.flatnonzero(tfree1.min(axis=0) <= cfg.horizon)
+    place = place_values(city, tab, sectors)
     out = np.zeros((cands.size, cfg.samples), dtype=np.int64)
     for s in range(cfg.samples):
         ap, ad, ast = (np.empty(4096, np.int32) for _ in range(3))
@@ -63,19 +66,24 @@ def reference_tail_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
                 v = int(st.dest[i]) if busy else int(st.pos[i])
                 d = int(city.dist[v, waiting].min()) if waiting.size else cfg.tail
                 spared += (cfg.tail - min(cfg.tail, busy + d)) ** 2
-            out[c, s] = 2 * cfg.cycle * (total + cfg.tail * g) - spared
+            if cfg.place:
+                ends = [int(st.pos[i]) for i in simulated if st.tau[i] == 0]
+                out[c, s] = PLACE_SCALE * total + cfg.place * int(place[ends].sum())
+            else:
+                out[c, s] = 2 * cfg.cycle * (total + cfg.tail * g) - spared
     return out
 
 
 @pytest.mark.parametrize("base,ce,scope", [("greedy", "limited", "local"), ("ia", "standard", "map"), ("greedy", "standard", "map"),
                                            ("ia", "limited", "local")])
-def test_rollout_costs_with_a_tail_equal_the_simulator(base: str, ce: str, scope: str) -> None:
+@pytest.mark.parametrize("end", [{"tail": 9, "cycle": 4}, {"place": 3}])
+def test_rollout_costs_with_a_tail_equal_the_simulator(base: str, ce: str, scope: str, end: dict) -> None:
     city = grid_city(5, 4)
     fc = uniform_forecast(city, [0.6, 1.4, 0.2, 2.0])
     checked = 0
     for seed in range(3):
         obs = random_state(city, np.random.default_rng(seed), taxis=6, requests=7)
-        ctx = context(city, obs, fc, horizon=4, samples=12, base=base, ce=ce, scope=scope, seed=seed, tail=9, cycle=4)
+        ctx = context(city, obs, fc, horizon=4, samples=12, base=base, ce=ce, scope=scope, seed=seed, **end)
         u = ctx.base_controls.copy()
         for agent in np.flatnonzero(obs.tau == 0):
             cands, costs = agent_costs(ctx, u[:agent], int(agent))
@@ -113,9 +121,12 @@ def test_tail_is_off_by_default_and_checked() -> None:
         make_policy("surge", city, forecast="true-rate").config, tail=30, cycle=8)
     with pytest.raises(ConfigError, match="cycle at least 1"):
         RolloutConfig(tail=5, cycle=0)
+    with pytest.raises(ConfigError, match="tail and place are alternatives"):
+        RolloutConfig(tail=5, place=1)
+    assert make_policy("surge", city, forecast="true-rate").config.place == 0
 
 
-@pytest.mark.parametrize("options", [{"tail": 20}, {"tail": 20, "base": "ia", "adaptive": None}])
+@pytest.mark.parametrize("options", [{"tail": 20}, {"tail": 20, "base": "ia", "adaptive": None}, {"place": 3}])
 def test_same_seed_same_decisions_with_a_tail(options: dict) -> None:
     city = grid_city(6, 6)
     world = StubWorld(city, 20.0)
@@ -132,15 +143,17 @@ def test_same_seed_same_decisions_with_a_tail(options: dict) -> None:
     assert plain.decisions_sha256 != runs[0].decisions_sha256  # the tail changes what is decided
 
 
-def test_exact_shortcuts_change_no_decision_with_a_tail() -> None:
-    """Every shortcut left on with a tail (the skip and the shadow replays switch off) keeps the decisions of none."""
+@pytest.mark.parametrize("end", [{"tail": 20, "cycle": 8}, {"place": 2}])
+def test_exact_shortcuts_change_no_decision_with_a_tail(end: dict) -> None:
+    """Every shortcut left on with a tail or place values (the skip and the shadow replays switch off) keeps the decisions of none."""
     from city.scenario import load_city
     from tests.test_planning_speed import shortcuts_settled
 
-    shortcuts_settled(load_city("synthetic"), range(1), tail=20, cycle=8, cap=6)
+    shortcuts_settled(load_city("synthetic"), range(1), cap=6, **end)
 
 
-def test_waves_match_sequential_turns_with_a_tail() -> None:
+@pytest.mark.parametrize("end", [{"tail": 20}, {"place": 2}])
+def test_waves_match_sequential_turns_with_a_tail(end: dict) -> None:
     from agents.rollout import DemandTables, prepare_step
     from agents.rollout_config import default_prune
     from agents.waves import plan_waves
@@ -150,13 +163,13 @@ def test_waves_match_sequential_turns_with_a_tail() -> None:
     city = load_city("synthetic")
     obs = seeded_state(city, 7, taxis=80)
     fc = forecast(city, np.random.default_rng(7))
-    config = RolloutConfig(horizon=H, samples=SAMPLES, prune=default_prune(H), seed=1, adaptive=2.0, batch=16, cap=24, tail=20)
+    config = RolloutConfig(horizon=H, samples=SAMPLES, prune=default_prune(H), seed=1, adaptive=2.0, batch=16, cap=24, **end)
     ctx = prepare_step(city, config, obs, DemandTables.build(city, fc, config.ce, config.seed), obs.t % 60)
     sequential = ctx.base_controls.copy()
     for agent in np.flatnonzero(obs.tau == 0):
         sequential[agent] = plan_agent(ctx, sequential[:agent], int(agent))
     assert plan_waves(city, obs, config.prune).critical_path < np.flatnonzero(obs.tau == 0).size
-    policy = make_policy("surge", city, forecast="true-rate", workers=2, horizon=H, samples=SAMPLES, seed=1, batch=16, tail=20)
+    policy = make_policy("surge", city, forecast="true-rate", workers=2, horizon=H, samples=SAMPLES, seed=1, batch=16, **end)
     assert policy.config == config
     u = ctx.base_controls.copy()
     policy._act_waves(ctx, u)

@@ -1,4 +1,4 @@
-"""A ``surge`` with the fluid tail in the distributed fleet: one process per taxi over a real zenoh router, the in-process decisions."""
+"""A ``surge`` with a tail or place values in the distributed fleet: one process per taxi over a real zenoh router, the in-process decisions."""
 
 from __future__ import annotations
 
@@ -10,10 +10,12 @@ from coordinator.runtime import FleetConfig
 pytestmark = pytest.mark.usefixtures("compiled_kernels")
 
 
-def test_distributed_surge_with_a_tail_makes_the_in_process_decisions() -> None:
-    """The tail travels in the run spec's rollout settings; every agent plans with it, side by side."""
+@pytest.mark.parametrize("end", [{"tail": 20, "cycle": 8}, {"place": 2}])
+def test_distributed_surge_with_a_tail_makes_the_in_process_decisions(end: dict) -> None:
+    """The tail or place values travel in the run spec's rollout settings; every agent plans with them,
+    the place values from the forecast of its own sectors."""
     cfg = FleetConfig(run="same-surge-tail", taxis=3, minutes=8, policy="surge",
-                      options={"forecast": "true-rate", "samples": 100, "tail": 20, "cycle": 8}, deadline_s=120,
+                      options={"forecast": "true-rate", "samples": 100, **end}, deadline_s=120,
                       join_timeout_s=300, predictor=False)
     dist = run_local_fleet(cfg, secure=False, agent_threads=1)
     ref = in_process(cfg)
