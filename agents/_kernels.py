@@ -171,8 +171,9 @@ def _first_plans(
     return plan_c, plan_d
 
 
-#: Units per request-minute of a rollout's cost with ``place``: the place values are tenths of a hop.
-PLACE_SCALE = 10
+#: Units per request-minute of a rollout's cost with ``place``: the place values are tenths of a hop and
+#: ``place`` is in tenths of a request-minute per hop.
+PLACE_SCALE = 100
 
 
 @njit(cache=True)

@@ -68,7 +68,7 @@ class RolloutConfig:
     cycle : int
         Minutes per pickup of a taxi in the tail (trip plus approach).
     place : int
-        Request-minutes per hop that each simulated taxi free after the
+        Tenths of a request-minute per hop that each simulated taxi free after the
         horizon costs where it stands, by its expected hops to the next request
         forecast in the sampled sectors (:func:`agents.rollout.place_values`);
         0, the default, values none.  Rewards ending the horizon where the

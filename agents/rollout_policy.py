@@ -96,7 +96,7 @@ class RolloutPolicy(Policy):
         Option("batch", int, low=2, help="samples per batch of adaptive"),
         Option("tail", int, low=0, high=240, help="minutes after the horizon valued by a fluid terminal cost (0: none)"),
         Option("cycle", int, low=1, high=240, help="minutes per pickup of a taxi in the tail"),
-        Option("place", int, low=0, high=1000, help="request-minutes per hop of the taxis' end distance to forecast demand (0: none)"),
+        Option("place", int, low=0, high=1000, help="tenths of a request-minute per hop of the free taxis' end distance to forecast demand (0: none)"),
         Option("workers", int, low=1, help="threads planning independent agents of a minute concurrently"),
     )
     shortcuts: Shortcuts = Shortcuts()

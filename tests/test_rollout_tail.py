@@ -26,7 +26,7 @@ def reference_tail_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
     The tail (:func:`agents._kernels._with_tail`): ``2 cycle (Σ g + tail g_H) - Σ_i (tail - a_i)²`` over the
     taxis the rollout simulates (free at some step of the horizon in some candidate), ``a_i`` taxi i's busy
     minutes left after the horizon plus its hops from its node (its drop-off when busy) to the nearest
-    request still waiting, at most ``tail``.  With ``place``: ``10 Σ g + place Σ_i V(v_i)``, ``V`` the place
+    request still waiting, at most ``tail``.  With ``place``: ``100 Σ g + place Σ_i V(v_i)``, ``V`` the place
     values (:func:`agents.rollout.place_values`) and ``v_i`` the node of taxi i, over the taxis free after the horizon.
     """
     city, cfg, obs = ctx.city, ctx.config, ctx.obs
