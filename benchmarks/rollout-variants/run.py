@@ -25,8 +25,9 @@ import time
 from pathlib import Path
 
 from agents.base import EpisodeContext, make_policy, parse_policy
+from city.episode import episode_requests, initial_positions, run_episode
 from city.scenario import load_scenario
-from coordinator import evaluate as E
+from coordinator.experiments import evaluate as E
 
 
 def main() -> None:
@@ -56,8 +57,8 @@ def main() -> None:
         for date_text in a.dates:
             for hour in a.hours:
                 date = dt.date.fromisoformat(date_text)
-                requests = E.episode_requests(scen.world, date, hour, a.minutes)
-                start = E.initial_positions(scen.city, a.taxis, seed)
+                requests = episode_requests(scen.world, date, hour, a.minutes)
+                start = initial_positions(scen.city, a.taxis, seed)
                 ctx = EpisodeContext(city=scen.city, date=date, hour=hour, minutes=a.minutes, seed=seed, world=scen.world)
                 for label in a.policies:
                     if (date_text, hour, seed, label) in done:
@@ -67,7 +68,7 @@ def main() -> None:
                         options["seed"] = E.instance_seed(date, hour, seed)
                     policy = make_policy(name, scen.city, **options)
                     t0 = time.perf_counter()
-                    r = E.run_episode(scen.city, policy, requests, start, ctx)
+                    r = run_episode(scen.city, policy, requests, start, ctx)
                     doc["episodes"].append({
                         "date": date_text, "hour": hour, "seed": seed, "policy": label,
                         "total_cost": r.total_cost, "served": r.served, "outstanding_end": r.outstanding_end,
