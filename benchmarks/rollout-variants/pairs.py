@@ -65,7 +65,7 @@ def main() -> None:
     out = []
     for scen, rows in sorted(data.items()):
         labels = sorted({k[3] for k in rows})
-        refs = [r for r in ("rebalance:forecast=previous-hour", "surge:forecast=previous-hour", "ia", "match") if r in labels]
+        refs = [r for r in labels if r.startswith(("rebalance", "match"))] + [r for r in ("surge:forecast=previous-hour", "ia") if r in labels]
         for hours in ((17, 19), (17,), (19,)):
             for v in labels:
                 for r in refs:
