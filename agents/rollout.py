@@ -9,7 +9,7 @@ from the forecast.  The cost of a rollout is the sum of the stage costs (the
 requests outstanding after each minute) plus a terminal cost, the requests
 still outstanding at the end; with ``tail`` (off by default) a fluid estimate
 of the waiting in the minutes after the horizon is added (:func:`agents._kernels._with_tail`),
-or with ``place`` the taxis' expected distance to the forecast's next request (:func:`place_values`).
+or with ``place`` the taxis' expected distance to the forecast's next request (:func:`agents.place_values.place_values`).
 The agent takes the control of least Monte-Carlo
 mean cost; ties go to staying, then to pickup, then to the lowest node id.
 Busy taxis have a single control (their next hop) and are not planned.
@@ -73,6 +73,7 @@ from agents import _kernels as K
 from agents._adaptive import best_candidate, eliminate
 from agents.demand_tables import DemandTables
 from agents.greedy import greedy_controls
+from agents.place_values import place_values
 from agents.ia import ia_controls
 from agents.rollout_config import BASES, CE_MODES, NEAR_K, RolloutConfig
 from agents.shortcuts import MINUTE_NEAR_K, PlanStats, Shortcuts, transposed
@@ -255,34 +256,6 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
 
 
 _NO_PLACE = np.empty(0, dtype=np.int64)
-_PLACES: dict[tuple[int, int, bytes], tuple[object, np.ndarray]] = {}
-
-
-def place_values(city: City, tables: DemandTables, sectors: np.ndarray) -> np.ndarray:
-    """Per node, the expected hops (in tenths, rounded) to the next request forecast in ``sectors``.
-
-    A request of sector ``q`` comes with probability ``η_q / Σ η`` and its
-    pickup node from the sector's pickup table; without demand, zeros.  Kept
-    per (city, tables, sectors): the tables change with the forecast's hour only.
-    """
-    key = (id(city), id(tables), sectors.tobytes())
-    hit = _PLACES.get(key)
-    if hit is not None and hit[0] is tables:
-        return hit[1]
-    eta = tables.eta[sectors]
-    values = np.zeros(city.n_nodes)
-    if eta.sum() > 0:
-        for q, rate in zip(sectors.tolist(), eta.tolist()):
-            lo, hi = int(tables.pk_ptr[q]), int(tables.pk_ptr[q + 1])
-            if rate <= 0 or hi == lo:
-                continue
-            w = np.diff(tables.pk_cum[lo:hi], prepend=0.0)
-            values += (rate / eta.sum()) * (city.dist[:, tables.pk_node[lo:hi]] @ (w / w.sum()))
-    out = np.ascontiguousarray(np.rint(10.0 * values), dtype=np.int64)
-    if len(_PLACES) > 512:
-        _PLACES.clear()
-    _PLACES[key] = (tables, out)
-    return out
 
 
 def cap_ranking(city: City, obs: Observation, here: int, taxis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

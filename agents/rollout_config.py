@@ -70,7 +70,7 @@ class RolloutConfig:
     place : int
         Tenths of a request-minute per hop that each simulated taxi free after the
         horizon costs where it stands, by its expected hops to the next request
-        forecast in the sampled sectors (:func:`agents.rollout.place_values`);
+        forecast in the sampled sectors (:func:`agents.place_values.place_values`);
         0, the default, values none.  Rewards ending the horizon where the
         forecast puts demand.  An alternative to ``tail``; with either the
         exact shortcuts that leave out taxis unable to pick up, or replay the

@@ -12,7 +12,8 @@ from agents.base import EpisodeContext, make_policy
 from agents.greedy import greedy_controls
 from agents.ia import ia_controls
 from agents._kernels import PLACE_SCALE
-from agents.rollout import CE_MODES, agent_costs, candidate_controls, place_values, plan_agent
+from agents.place_values import place_values
+from agents.rollout import CE_MODES, agent_costs, candidate_controls, plan_agent
 from agents.rollout_config import RolloutConfig
 from city.errors import ConfigError
 from city.sim import FleetSim, Requests
@@ -27,7 +28,7 @@ def reference_tail_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
     taxis the rollout simulates (free at some step of the horizon in some candidate), ``a_i`` taxi i's busy
     minutes left after the horizon plus its hops from its node (its drop-off when busy) to the nearest
     request still waiting, at most ``tail``.  With ``place``: ``100 Σ g + place Σ_i V(v_i)``, ``V`` the place
-    values (:func:`agents.rollout.place_values`) and ``v_i`` the node of taxi i, over the taxis free after the horizon.
+    values (:func:`agents.place_values.place_values`) and ``v_i`` the node of taxi i, over the taxis free after the horizon.
     """
     city, cfg, obs = ctx.city, ctx.config, ctx.obs
     here = int(obs.pos[agent])
