@@ -138,6 +138,31 @@ def _walk(v: int, target: int, hops: int, hop_t: np.ndarray) -> int:
 
 
 @njit(cache=True)
+def _time_to_pickup(
+    v: int,
+    busy: int,
+    tail: int,
+    alive: np.ndarray,
+    act: np.ndarray,
+    n_act: int,
+    near: np.ndarray,
+    near_d: np.ndarray,
+    e_pick: np.ndarray,
+    a_pick: np.ndarray,
+    dist: np.ndarray,
+    dist_t: np.ndarray,
+) -> int:
+    """Minutes until a taxi at node ``v`` after the horizon, busy ``busy`` more minutes, can stand at the nearest waiting request; at most ``tail``.
+
+    The nearest request is taken among those still waiting at the end of the
+    horizon (tracked and sampled arrivals), from ``v`` (the taxi's node, or
+    its drop-off when busy); with none, ``tail``.
+    """
+    d, _, _ = nearest_request(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+    return min(tail, max(0, busy) + d)
+
+
+@njit(cache=True)
 def simulate_greedy(
     horizon: int,
     alive: np.ndarray,
@@ -172,8 +197,16 @@ def simulate_greedy(
     memo_d: np.ndarray,
     memo_c: np.ndarray,
     tick: np.ndarray,
-) -> tuple[int, int, int]:
-    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``(Σ g_k + g_H, T, events)``.
+    tail: int = 0,
+    place: np.ndarray = np.empty(0, dtype=np.int64),
+) -> tuple[int, int, int, int]:
+    """The greedy base policy for steps ``1 … horizon``, event by event; returns ``(Σ g_k + g_H, T, events, end)``.
+
+    ``end`` values the taxis' state after the horizon: with ``tail > 0``,
+    ``Σ_i (tail - a_i)²``, ``a_i`` taxi i's time to its next pickup
+    (:func:`_time_to_pickup`); else with ``place`` (one value per node),
+    ``Σ_i place[v_i]`` over the taxis free after the horizon, ``v_i`` taxi i's
+    node (a busy taxi's drop-off is the request's, not a choice); else 0.
 
     A free taxi heading for its nearest request keeps it as the nearest while
     it moves (the target gets exactly one hop closer, every other request at
@@ -313,7 +346,19 @@ def simulate_greedy(
                         n_act -= 1
                         break
         cost += n_alive
-    return cost + n_alive, t_first, n_ev
+    spared = 0
+    if tail > 0 or place.shape[0] > 0:
+        for i in range(mt):
+            v = tpos[i]
+            c = tgt[i]
+            if tfree[i] <= horizon + 1 and c >= 0:
+                v = _walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(horizon + 1 - kanc[i], d0[i]), hop_t)
+            if tail > 0:
+                a = _time_to_pickup(v, tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                spared += (tail - a) * (tail - a)
+            elif tfree[i] <= horizon + 1:
+                spared += place[v]
+    return cost + n_alive, t_first, n_ev, spared
 
 
 @njit(cache=True)
@@ -481,8 +526,12 @@ def simulate_ia(
     target: np.ndarray,
     matched: np.ndarray,
     heap: np.ndarray,
-) -> int:
-    """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``Σ g_k + g_H``.
+    tail: int = 0,
+    place: np.ndarray = np.empty(0, dtype=np.int64),
+) -> tuple[int, int]:
+    """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``(Σ g_k + g_H, end)``.
+
+    ``end`` is as in :func:`simulate_greedy`.
 
     Every step, :func:`agents.ia.ia_controls`: broadcast of local eligibility
     commits the globally closest (distance, taxi, request) pair, retires both,
@@ -574,4 +623,13 @@ def simulate_ia(
                             n_act -= 1
                             break
         cost += n_alive
-    return cost + n_alive
+    spared = 0
+    if tail > 0:
+        for i in range(mt):
+            a = _time_to_pickup(tpos[i], tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+            spared += (tail - a) * (tail - a)
+    elif place.shape[0] > 0:
+        for i in range(mt):
+            if tfree[i] <= horizon + 1:
+                spared += place[tpos[i]]
+    return cost + n_alive, spared

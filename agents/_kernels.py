@@ -177,6 +177,30 @@ def _first_plans(
     return plan_c, plan_d
 
 
+#: Units per request-minute of a rollout's cost with ``place``: the place values are tenths of a hop and
+#: ``place`` is in tenths of a request-minute per hop.
+PLACE_SCALE = 100
+
+
+@njit(cache=True)
+def _with_tail(path: int, alive: np.ndarray, n: int, spared: int, tail: int, cycle: int) -> int:
+    """A rollout's cost with the fluid tail of ``tail`` minutes after the horizon, in units of ``1 / (2 cycle)`` request-minutes.
+
+    Past the horizon the requests still waiting (``g_H``, the alive flags of
+    ``alive[:n]``) wait ``tail`` more minutes, less what the taxis serve:
+    taxi i, from ``a_i`` minutes on (the time it needs to stand at the
+    nearest of them, :func:`agents._basesim._time_to_pickup`), picks up one
+    per ``cycle`` minutes, each sparing the rest of the tail,
+    ``Σ_j (tail - a_i - j cycle) ≈ (tail - a_i)² / (2 cycle)``; ``spared`` is
+    ``Σ_i (tail - a_i)²`` over the simulated taxis.  Scaled by ``2 cycle`` to
+    stay an integer.
+    """
+    g_end = 0
+    for r in range(n):
+        g_end += alive[r]
+    return 2 * cycle * (path + tail * g_end) - spared
+
+
 @njit(cache=True)
 def _run_samples(
     lo: int,
@@ -188,6 +212,10 @@ def _run_samples(
     shadow: np.ndarray,
     share: bool,
     ag: int,
+    tail: int,
+    cycle: int,
+    place_w: int,
+    place: np.ndarray,
     plan_c: np.ndarray,
     plan_d: np.ndarray,
     base: int,
@@ -297,22 +325,28 @@ def _run_samples(
                 rec_ag = ag if rec else -1
                 steps = ev_step if c == ref else no_ev
                 codes = ev_code if c == ref else no_code
-                cost, t_first, nev = simulate_greedy(
+                cost, t_first, nev, spared = simulate_greedy(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t, act, target, seen, best_d, need, free,
                     plan_c[c], plan_d[c], rec_ag, rec_pos[c], rec_tgt[c], steps, codes, memo_key, memo_d, memo_c, tick,
+                    tail, place,
                 )
-                out[c, col] = g0 + cost
                 rec_t[c] = t_first
                 full[c] = rec
                 if c == ref:
                     n_ev = nev
             else:
-                out[c, col] = g0 + simulate_ia(
+                cost, spared = simulate_ia(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t,
-                    act, lb, seen, free, best_d, best_c, target, matched, heap,
+                    act, lb, seen, free, best_d, best_c, target, matched, heap, tail, place,
                 )
+            if tail > 0:
+                out[c, col] = _with_tail(g0 + cost, alive, r0 + n_arr, spared, tail, cycle)
+            elif place.shape[0] > 0:
+                out[c, col] = PLACE_SCALE * (g0 + cost) + place_w * spared
+            else:
+                out[c, col] = g0 + cost
 
 
 @njit(cache=True, parallel=True, nogil=True)
@@ -325,6 +359,10 @@ def rollout_costs(
     shadow: np.ndarray,
     share: bool,
     ag: int,
+    tail: int,
+    cycle: int,
+    place_w: int,
+    place: np.ndarray,
     key: np.uint64,
     minute0: int,
     mode: int,
@@ -395,7 +433,7 @@ def rollout_costs(
         for chunk in range(g * n_chunks // n_groups, (g + 1) * n_chunks // n_groups):
             _run_samples(
                 s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
-                active, shadow, share, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop,
+                active, shadow, share, ag, tail, cycle, place_w, place, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop,
                 lists, lists_d, rel_node, sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals,
                 dist, dist_t, hop_t,
             )
@@ -418,6 +456,10 @@ def rollout_costs_serial(
     shadow: np.ndarray,
     share: bool,
     ag: int,
+    tail: int,
+    cycle: int,
+    place_w: int,
+    place: np.ndarray,
     key: np.uint64,
     minute0: int,
     mode: int,
@@ -453,7 +495,7 @@ def rollout_costs_serial(
     for chunk in range(n_chunks):
         _run_samples(
             s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
-            active, shadow, share, ag, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
+            active, shadow, share, ag, tail, cycle, place_w, place, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
             sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals, dist, dist_t, hop_t,
         )
     return out, settled

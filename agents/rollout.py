@@ -7,7 +7,10 @@ after it the base policy's control for the current minute, and then the
 base policy runs for every taxi for ``H`` more minutes on requests sampled
 from the forecast.  The cost of a rollout is the sum of the stage costs (the
 requests outstanding after each minute) plus a terminal cost, the requests
-still outstanding at the end.  The agent takes the control of least Monte-Carlo
+still outstanding at the end; with ``tail`` (off by default) a fluid estimate
+of the waiting in the minutes after the horizon is added (:func:`agents._kernels._with_tail`),
+or with ``place`` the taxis' expected distance to the forecast's next request (:func:`agents.place_values.place_values`).
+The agent takes the control of least Monte-Carlo
 mean cost; ties go to staying, then to pickup, then to the lowest node id.
 Busy taxis have a single control (their next hop) and are not planned.
 
@@ -70,6 +73,7 @@ from agents import _kernels as K
 from agents._adaptive import best_candidate, eliminate
 from agents.demand_tables import DemandTables
 from agents.greedy import greedy_controls
+from agents.place_values import place_values
 from agents.ia import ia_controls
 from agents.rollout_config import BASES, CE_MODES, NEAR_K, RolloutConfig
 from agents.shortcuts import MINUTE_NEAR_K, PlanStats, Shortcuts, transposed
@@ -169,6 +173,7 @@ class _Inputs:
     args: tuple
     ag: int
     shadow: np.ndarray
+    place: np.ndarray
 
 
 def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _Inputs:
@@ -206,7 +211,9 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
     taxis = np.flatnonzero(keep)
     useful = np.ones(taxis.size, dtype=bool)
     capped = cfg.cap is not None and taxis.size > cfg.cap
-    if greedy and (sc.reach or sc.skip or capped):
+    # With a tail or place values every simulated taxi's end position is part of the cost: none is left out
+    # for not reaching a pickup.
+    if greedy and not cfg.tail and not cfg.place and (sc.reach or sc.skip or capped):
         # Where a pickup can happen within the horizon: tracked requests and possible arrivals.
         spots = _pickup_spots(ctx, sectors, rel_node, req_pick[rel_req & alive0.any(axis=0)])
         if sc.skip and PICKUP not in cands:
@@ -242,8 +249,13 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
         sectors.astype(np.int64), tab.eta, tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum,
         tab.beta_cum, _max_arrivals(tab.eta[sectors], mode, ctx.minute0, H), city.dist, dist_t, hop_t,
     )
-    shadow = (cands != PICKUP) & (sc.shadow and greedy)
-    return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow))
+    # With a tail the agent's end position is part of every cost: no candidate's cost is another's.
+    shadow = (cands != PICKUP) & (sc.shadow and greedy and not cfg.tail and not cfg.place)
+    place = place_values(city, tab, sectors) if cfg.place else _NO_PLACE
+    return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow), place=place)
+
+
+_NO_PLACE = np.empty(0, dtype=np.int64)
 
 
 def cap_ranking(city: City, obs: Observation, here: int, taxis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -286,7 +298,7 @@ def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarra
 def kernel_args(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray) -> tuple:
     """The arguments of either rollout kernel for samples ``s_lo … s_hi-1`` of a decision, all but the chunk count."""
     cfg = ctx.config
-    return (BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, *inp.args)
+    return (BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, cfg.tail, cfg.cycle, cfg.place, inp.place, *inp.args)
 
 
 def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np.ndarray, np.ndarray]:

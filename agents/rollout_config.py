@@ -55,6 +55,26 @@ class RolloutConfig:
         standard errors; the decision is the best of those left.
     batch : int
         Samples per batch of ``adaptive``.
+    tail : int
+        Minutes after the horizon valued by a fluid terminal cost (0, the
+        default, values none): the requests still waiting at the horizon wait
+        ``tail`` more minutes, less what the simulated taxis serve, each from
+        the time it can reach the nearest of them, one per ``cycle`` minutes
+        (:func:`agents._kernels._with_tail`).  Sees past the horizon what the
+        base policy's end state is worth: a taxi left far from demand, or
+        busy long after the horizon, serves less.  With a tail the exact
+        shortcuts that leave out taxis unable to pick up, or replay the agent
+        alone, are off.
+    cycle : int
+        Minutes per pickup of a taxi in the tail (trip plus approach).
+    place : int
+        Tenths of a request-minute per hop that each simulated taxi free after the
+        horizon costs where it stands, by its expected hops to the next request
+        forecast in the sampled sectors (:func:`agents.place_values.place_values`);
+        0, the default, values none.  Rewards ending the horizon where the
+        forecast puts demand.  An alternative to ``tail``; with either the
+        exact shortcuts that leave out taxis unable to pick up, or replay the
+        agent alone, are off.
     """
 
     horizon: int = 10
@@ -67,6 +87,9 @@ class RolloutConfig:
     cap: int | None = None
     adaptive: float | None = None
     batch: int = 100
+    tail: int = 0
+    cycle: int = 10
+    place: int = 0
 
     def __post_init__(self) -> None:
         if self.horizon < 1 or self.samples < 1:
@@ -83,6 +106,12 @@ class RolloutConfig:
             raise ConfigError(f"rollout: cap must be at least 1 taxi, got {self.cap}")
         if self.adaptive is not None and not self.adaptive > 0:
             raise ConfigError(f"rollout: adaptive must be a positive number of standard errors, got {self.adaptive}")
+        if self.tail < 0 or self.cycle < 1:
+            raise ConfigError(f"rollout: tail must be non-negative and cycle at least 1 minute, got {self.tail} and {self.cycle}")
+        if self.place < 0:
+            raise ConfigError(f"rollout: place must be non-negative, got {self.place}")
+        if self.place and self.tail:
+            raise ConfigError("rollout: tail and place are alternatives; set one of them")
         if self.batch < 2:
             raise ConfigError(f"rollout: batch must be at least 2 samples, got {self.batch}")
 

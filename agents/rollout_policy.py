@@ -94,6 +94,9 @@ class RolloutPolicy(Policy):
         Option("adaptive", float, low=0, open_low=True, words={"none": None},
                help="approximation: drop a candidate once it trails the best by this many standard errors"),
         Option("batch", int, low=2, help="samples per batch of adaptive"),
+        Option("tail", int, low=0, high=240, help="minutes after the horizon valued by a fluid terminal cost (0: none)"),
+        Option("cycle", int, low=1, high=240, help="minutes per pickup of a taxi in the tail"),
+        Option("place", int, low=0, high=1000, help="tenths of a request-minute per hop of the free taxis' end distance to forecast demand (0: none)"),
         Option("workers", int, low=1, help="threads planning independent agents of a minute concurrently"),
     )
     shortcuts: Shortcuts = Shortcuts()
@@ -128,6 +131,9 @@ class RolloutPolicy(Policy):
         cap: int | None | object = DEFAULT,
         adaptive: float | None | object = DEFAULT,
         batch: int | None = None,
+        tail: int | None = None,
+        cycle: int | None = None,
+        place: int | None = None,
     ) -> RolloutConfig:
         """The planner settings of this policy with the options not given at its defaults; no forecast is loaded.
 
@@ -149,6 +155,9 @@ class RolloutPolicy(Policy):
             cap=None if cap is None else int(cap),
             adaptive=None if adaptive is None else float(adaptive),
             batch=int(batch if batch is not None else d["batch"]),
+            tail=int(tail if tail is not None else d.get("tail", 0)),
+            cycle=int(cycle if cycle is not None else d.get("cycle", 10)),
+            place=int(place if place is not None else d.get("place", 0)),
         )
 
     def reset(self, context: EpisodeContext) -> None:
