@@ -51,8 +51,8 @@ def pair(rows: dict[tuple, dict], a: str, b: str, hours: tuple[int, ...] | None 
     res: dict = {"variant": a, "reference": b, "n": len(keys)}
     for part, lo, hi in (("total", 0, None), ("minutes_0_19", 0, 20), ("minutes_20_59", 20, None)):
         d = np.array([sum(rows[k + (a,)]["stage_costs"][lo:hi]) - sum(rows[k + (b,)]["stage_costs"][lo:hi]) for k in keys], float)
-        m, l, h = ci(d)
-        res[part] = {"mean": round(m, 1), "ci95": [round(l, 1), round(h, 1)], "wins": int((d < 0).sum())}
+        m, low, high = ci(d)
+        res[part] = {"mean": round(m, 1), "ci95": [round(low, 1), round(high, 1)], "wins": int((d < 0).sum())}
     res["plan_seconds_per_step"] = round(float(np.mean([rows[k + (a,)]["plan_seconds_per_step"] for k in keys])), 4)
     return res
 

@@ -64,7 +64,7 @@ def main() -> None:
                     if (date_text, hour, seed, label) in done:
                         continue
                     name, options = parse_policy(label)
-                    if "seed" not in options and E._takes_rollout_seed(name):  # noqa: SLF001 - the evaluator's own rule, reused so seeds match
+                    if "seed" not in options and E.takes_rollout_seed(name):
                         options["seed"] = E.instance_seed(date, hour, seed)
                     policy = make_policy(name, scen.city, **options)
                     t0 = time.perf_counter()

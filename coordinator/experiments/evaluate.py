@@ -99,7 +99,7 @@ def instance_seed(date: str | dt.date, hour: int, seed: int) -> int:
     return int.from_bytes(hashlib.sha256(text.encode()).digest()[:4], "little") & 0x7FFFFFFF
 
 
-def _takes_rollout_seed(name: str) -> bool:
+def takes_rollout_seed(name: str) -> bool:
     from agents.base import policy_class
 
     return "seed" in inspect.signature(getattr(policy_class(name), "rollout_config", lambda: None)).parameters
@@ -133,7 +133,7 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
     for label in labels:
         name, options = parse_policy(label)
         options = {**cfg.policy_options.get(label, {}), **options}
-        if "seed" not in options and _takes_rollout_seed(name):
+        if "seed" not in options and takes_rollout_seed(name):
             options["seed"] = instance_seed(date, hour, seed)
         policy = make_policy(name, scen.city, **options)
         t0 = time.perf_counter()
