@@ -146,6 +146,8 @@ _LAZY: dict[str, str] = {
     "oracle-auction": "agents.oracle",
     "surge": "agents.rollout_policy",
     "garces2023": "agents.rollout_policy",
+    "match": "agents.match",
+    "rebalance": "agents.rebalance",
 }
 
 
