@@ -22,10 +22,13 @@ cost : ``hops`` | ``sqrt`` | ``wait`` (default ``sqrt``)
 wait_weight : float ≥ 0 (default 0.1)
     Hops of ``sqrt`` cost one minute of a request's waiting is worth, for ``cost=wait``.
 
-A taxi standing on an outstanding request picks it up before the
-assignment: for these costs (``f(0)`` least, ``f`` subadditive, a request's
-own term the same whoever serves it) some optimal assignment does so, and it
-keeps ties from sending a taxi away from a waiting passenger.
+A taxi standing on an outstanding request picks it up (the oldest there)
+before the assignment, which then matches the other free taxis and
+requests.  For ``hops`` and ``sqrt`` (``f(0) = 0`` least, ``f``
+subadditive) some optimal assignment of all of them does so, so the rule
+loses nothing and keeps ties from sending a taxi away from a waiting
+passenger; for ``wait`` it is a rule: a passenger at the door is not left for
+an older one elsewhere.
 """
 
 from __future__ import annotations

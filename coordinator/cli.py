@@ -34,8 +34,9 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
                    help="registry names, each optionally with options: surge:forecast=true-rate,samples=500 "
                         "(oracle and oracle-auction always run)")
     p.add_argument("--forecast", default=None,
-                   help="forecast provider for surge (true-rate, previous-hour, model); garces2023 keeps previous-hour")
-    p.add_argument("--model", default=None, help="trained predictor directory for surge's --forecast model")
+                   help="forecast provider (true-rate, previous-hour, model) of every policy that reads one (surge, rebalance); "
+                        "garces2023 keeps previous-hour")
+    p.add_argument("--model", default=None, help="trained predictor directory for --forecast model")
     p.add_argument("--horizon", type=positive, default=None, help="rollout horizon H")
     p.add_argument("--samples", type=positive, default=None, help="rollout Monte-Carlo samples")
     p.add_argument("--world-seed", type=int, default=0, help="seed of the synthetic demand world")
