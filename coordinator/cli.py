@@ -30,7 +30,7 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=positive, default=25, help="initial states 0..N-1")
     p.add_argument("--taxis", type=positive, default=100)
     p.add_argument("--minutes", type=positive, default=60, help="episode length N in minutes")
-    p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"],
+    p.add_argument("--policies", nargs="+", default=["greedy", "ia", "match", "rebalance", "oracle"],
                    help="registry names, each optionally with options: surge:forecast=true-rate,samples=500 "
                         "(oracle and oracle-auction always run)")
     p.add_argument("--forecast", default=None,
@@ -101,6 +101,12 @@ def print_results(doc: dict, *, policy: str | None = None, plot_path: str | None
     if comparison:
         print()
         print(format_comparison(comparison))
+        from coordinator.practice import against_practice, verdict_lines
+
+        practice = against_practice(doc, policy)
+        if practice:
+            print()
+            print("\n".join(verdict_lines(practice)))
     n, below = oracle_exceptions(doc)
     print(f"\n{doc['reference_oracle']} had the lowest total cost in {n - len({(e['date'], e['hour'], e['seed']) for e in below})} of {n} instances")
     for e in below:
