@@ -6,7 +6,7 @@ took a tenth of a planning step.  The statistics are NumPy's to the last bit
 (``diff.mean(axis=1)`` and ``diff.std(axis=1, ddof=1) / sqrt(n)`` of the
 integer paired differences), so the rounds drop what NumPy's rounds dropped:
 the sums of integers are exact in any order, and the sum of squared
-deviations follows NumPy's pairwise summation (``tests/test_rollout.py``
+deviations follows NumPy's pairwise summation (``tests/agents/test_rollout.py``
 compares them bit for bit).
 """
 

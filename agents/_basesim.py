@@ -9,10 +9,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from agents._sampling import _BIG
+from agents._sampling import BIG_HOPS
+
 
 @njit(cache=True)
-def _fill_row(v: int, near: np.ndarray, near_d: np.ndarray, e_pick: np.ndarray, dist: np.ndarray) -> None:
+def fill_row(v: int, near: np.ndarray, near_d: np.ndarray, e_pick: np.ndarray, dist: np.ndarray) -> None:
     """List at ``near[v]``/``near_d[v]`` the requests nearest to node ``v`` by ``(dist[v, pickup], code)``."""
     r0 = e_pick.shape[0]
     kk = near.shape[1]
@@ -34,7 +35,7 @@ def _fill_row(v: int, near: np.ndarray, near_d: np.ndarray, e_pick: np.ndarray, 
 
 
 @njit(cache=True)
-def _nearest(
+def nearest_request(
     v: int,
     lb: int,
     seen: int,
@@ -59,11 +60,11 @@ def _nearest(
     now covering all ``n_seen`` arrivals (exact when they were scanned).
     """
     r0 = e_pick.shape[0]
-    best_d = _BIG
+    best_d = BIG_HOPS
     best_c = -1
     kl = near.shape[1]
     if kl > 0 and near_d[v, 0] < 0:
-        _fill_row(v, near, near_d, e_pick, dist)
+        fill_row(v, near, near_d, e_pick, dist)
     for j in range(kl):
         r = near[v, j]
         if alive[r]:
@@ -84,7 +85,7 @@ def _nearest(
                 lb = min(lb, np.int64(dist_t[a_pick[a], v]))
         if lb >= best_d:
             return best_d, best_c, lb
-    arr_d = _BIG
+    arr_d = BIG_HOPS
     for j in range(n_act):
         c = act[j]
         if alive[c]:
@@ -137,7 +138,7 @@ def _walk(v: int, target: int, hops: int, hop_t: np.ndarray) -> int:
 
 
 @njit(cache=True)
-def _simulate_greedy(
+def simulate_greedy(
     horizon: int,
     alive: np.ndarray,
     n_alive: int,
@@ -187,10 +188,10 @@ def _simulate_greedy(
     among the outstanding requests (the same in every sample; see
     :func:`_first_plans`), so that only the arrivals are compared here.
 
-    For the shadow shortcut (:func:`_shadow_greedy`), when ``ag >= 0`` the
+    For the shadow shortcut (:func:`shadow_greedy`), when ``ag >= 0`` the
     deciding agent (taxi ``ag``) has its state recorded at the start of each
     step, ``(node, target)`` in ``rec_pos``/``rec_tgt``, until ``T``, the first
-    step at which it stands at its target to pick up (``_BIG`` if never); when
+    step at which it stands at its target to pick up (``BIG_HOPS`` if never); when
     ``ev_step`` is not empty every pickup is recorded there as (step, code).
 
     Taxis that look for their nearest request from the same node in the same
@@ -205,7 +206,7 @@ def _simulate_greedy(
     n_act = 0
     ai = 0
     cost = 0
-    t_first = _BIG
+    t_first = BIG_HOPS
     n_ev = 0
     record_ev = ev_step.shape[0] > 0
     share = memo_key.shape[0] > 0
@@ -216,7 +217,7 @@ def _simulate_greedy(
         d0[i] = plan_d[i]
     for k in range(1, horizon + 1):
         tick[0] += 1
-        if ag >= 0 and t_first == _BIG:
+        if ag >= 0 and t_first == BIG_HOPS:
             c = tgt[ag]
             v = tpos[ag]
             if c >= 0:
@@ -246,7 +247,7 @@ def _simulate_greedy(
                     d = memo_d[v]
                     c2 = memo_c[v]
                 else:
-                    d, c2, _ = _nearest(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                    d, c2, _ = nearest_request(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
                     if share:
                         memo_key[v] = tick[0]
                         memo_d[v] = d
@@ -284,7 +285,7 @@ def _simulate_greedy(
         for i in range(mt):
             if tfree[i] > k or tgt[i] < 0 or kanc[i] + d0[i] != k:
                 continue
-            if i == ag and t_first == _BIG:
+            if i == ag and t_first == BIG_HOPS:
                 t_first = k
             c = tgt[i]
             v = e_pick[c] if c < r0 else a_pick[c - r0]
@@ -316,7 +317,7 @@ def _simulate_greedy(
 
 
 @njit(cache=True)
-def _shadow_greedy(
+def shadow_greedy(
     horizon: int,
     c: int,
     ref: int,
@@ -382,7 +383,7 @@ def _shadow_greedy(
         if tgt < 0 and not need and ai == first_new:
             pass
         elif need or tgt < 0:
-            d, c2, _ = _nearest(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+            d, c2, _ = nearest_request(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
             pos = v
             kanc = k
             tgt = c2
@@ -454,7 +455,7 @@ def _heap_pop(heap: np.ndarray, n: int) -> tuple[int, int]:
 
 
 @njit(cache=True)
-def _simulate_ia(
+def simulate_ia(
     horizon: int,
     alive: np.ndarray,
     n_alive: int,
@@ -487,7 +488,7 @@ def _simulate_ia(
     commits the globally closest (distance, taxi, request) pair, retires both,
     and repeats; each taxi's nearest free request is refreshed lazily.  ``lb[i]``
     bounds taxi ``i``'s distance to the alive arrivals among the first
-    ``seen[i]`` from below (see :func:`_nearest`): it drops by one when the
+    ``seen[i]`` from below (see :func:`nearest_request`): it drops by one when the
     taxi moves a hop and is unknown (-1) after a pickup.
     """
     r0 = e_pick.shape[0]
@@ -512,7 +513,7 @@ def _simulate_ia(
         if nf > 0 and n_alive > 0:
             for f in range(nf):
                 i = free[f]
-                best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                best_d[f], best_c[f], lb[i] = nearest_request(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
                 seen[i] = ai
             # A binary heap of (distance, taxi) keys; a key whose request was taken
             # meanwhile is refreshed when it surfaces (keys only ever grow).
@@ -527,7 +528,7 @@ def _simulate_ia(
                 c = best_c[f]
                 if not alive[c]:
                     i = free[f]
-                    best_d[f], best_c[f], lb[i] = _nearest(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                    best_d[f], best_c[f], lb[i] = nearest_request(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
                     if best_c[f] >= 0:
                         n_h = _heap_push(heap, n_h, best_d[f] * mt + f)
                     continue

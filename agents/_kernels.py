@@ -46,9 +46,15 @@ from numba import njit, prange
 # this import; a user's own setting wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from agents._basesim import _fill_row, _nearest, _shadow_greedy, _simulate_greedy, _simulate_ia
+from agents._basesim import (
+    fill_row,
+    nearest_request,
+    shadow_greedy,
+    simulate_greedy,
+    simulate_ia,
+)
 from agents._sampling import (
-    _BIG,
+    BIG_HOPS,
     GREEDY,
     IA,
     LIMITED_CE,
@@ -90,7 +96,7 @@ def fill_lists(near: np.ndarray, near_d: np.ndarray, pickups: np.ndarray, dist: 
         return
     for v in range(near.shape[0]):
         if near_d[v, 0] < 0:
-            _fill_row(v, near, near_d, pickups, dist)
+            fill_row(v, near, near_d, pickups, dist)
 
 
 @njit(cache=True)
@@ -162,12 +168,12 @@ def _first_plans(
     """Per candidate, each taxi free at step 1: its nearest outstanding request and distance."""
     n_c, mt = pos1.shape
     plan_c = np.full((n_c, mt), -1, dtype=np.int64)
-    plan_d = np.full((n_c, mt), _BIG, dtype=np.int64)
+    plan_d = np.full((n_c, mt), BIG_HOPS, dtype=np.int64)
     no_act = np.empty(0, dtype=np.int32)
     for c in range(n_c):
         for i in range(mt):
             if tfree1[c, i] <= 1:
-                plan_d[c, i], plan_c[c, i], _ = _nearest(pos1[c, i], -1, 0, 0, alive0[c], no_act, 0, near, near_d, e_pick, no_act, dist, dist_t)
+                plan_d[c, i], plan_c[c, i], _ = nearest_request(pos1[c, i], -1, 0, 0, alive0[c], no_act, 0, near, near_d, e_pick, no_act, dist, dist_t)
     return plan_c, plan_d
 
 
@@ -248,7 +254,7 @@ def _run_samples(
     no_code = np.empty(0, dtype=np.int64)
     rec_pos = np.empty((n_c, horizon + 2), dtype=np.int64)
     rec_tgt = np.empty((n_c, horizon + 2), dtype=np.int64)
-    rec_t = np.full(n_c, _BIG, dtype=np.int64)
+    rec_t = np.full(n_c, BIG_HOPS, dtype=np.int64)
     full = np.zeros(n_c, dtype=np.bool_)
     n_memo = dist.shape[0] if (share and base == GREEDY) else 0
     memo_key = np.full(n_memo, -1, dtype=np.int64)
@@ -271,7 +277,7 @@ def _run_samples(
             if ref >= 0 and c > ref and shadow[c]:
                 alive[:r0] = alive0[ref]
                 alive[r0 : r0 + n_arr] = True
-                f = _shadow_greedy(
+                f = shadow_greedy(
                     horizon, c, ref, pos1[c, ag], plan_c[c, ag], plan_d[c, ag], alive, n_arr, a_pick, a_step,
                     e_pick, near, near_d, dist, dist_t, hop_t, act, ev_step, ev_code, n_ev, full, rec_pos, rec_tgt, rec_t,
                 )
@@ -291,7 +297,7 @@ def _run_samples(
                 rec_ag = ag if rec else -1
                 steps = ev_step if c == ref else no_ev
                 codes = ev_code if c == ref else no_code
-                cost, t_first, nev = _simulate_greedy(
+                cost, t_first, nev = simulate_greedy(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t, act, target, seen, best_d, need, free,
                     plan_c[c], plan_d[c], rec_ag, rec_pos[c], rec_tgt[c], steps, codes, memo_key, memo_d, memo_c, tick,
@@ -302,7 +308,7 @@ def _run_samples(
                 if c == ref:
                     n_ev = nev
             else:
-                out[c, col] = g0 + _simulate_ia(
+                out[c, col] = g0 + simulate_ia(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t,
                     act, lb, seen, free, best_d, best_c, target, matched, heap,
@@ -363,10 +369,10 @@ def rollout_costs(
     Samples ``s_lo … s_hi-1`` are run, for the candidates flagged ``active``
     (the others get 0).  With the greedy base and ``shadow[0]``, candidates
     flagged in ``shadow`` (every candidate but pickup) are first replayed
-    for the agent alone (taxi ``ag``, see :func:`_shadow_greedy`); the second
+    for the agent alone (taxi ``ag``, see :func:`shadow_greedy`); the second
     result flags the (candidate, sample) costs settled that way.  With the
     greedy base and ``share``, taxis searching from the same node in the same
-    step share one search (:func:`_simulate_greedy`).  It releases the GIL:
+    step share one search (:func:`simulate_greedy`).  It releases the GIL:
     agents planning side by side in threads each run a region of their own
     (:func:`agents.rollout._serial_now`).
     """

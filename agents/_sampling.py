@@ -26,7 +26,7 @@ _S27 = np.uint64(27)
 _S31 = np.uint64(31)
 _S11 = np.uint64(11)
 _INV53 = 1.0 / 9007199254740992.0
-_BIG = 1 << 30
+BIG_HOPS = 1 << 30
 
 
 @njit(cache=True, inline="always")

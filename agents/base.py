@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import datetime as dt
 import math
 import os
 from abc import ABC, abstractmethod
@@ -11,26 +10,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from city.episode import EpisodeContext
 from city.errors import ConfigError
 from city.graph import City
-from city.sim import PICKUP, Observation, Requests
-
-
-@dataclass(frozen=True)
-class EpisodeContext:
-    """What a policy is told when an episode starts.
-
-    ``future`` (every request of the episode, including those not yet entered)
-    is filled in only for clairvoyant policies such as the oracle.
-    """
-
-    city: City
-    date: dt.date
-    hour: int
-    minutes: int
-    seed: int
-    world: Any = None
-    future: Requests | None = None
+from city.sim import PICKUP, Observation
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,15 @@ import numpy as np
 
 from agents import _oracle_kernels as OK
 from agents.auction import auction_assignment
-from agents.base import EpisodeContext, Option, Policy, busy_next_hops, head_for, make_policy, register
+from agents.base import (
+    EpisodeContext,
+    Option,
+    Policy,
+    busy_next_hops,
+    head_for,
+    make_policy,
+    register,
+)
 from city.errors import ConfigError
 from city.graph import City
 from city.sim import PICKUP, FleetSim, Observation, Requests

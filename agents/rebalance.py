@@ -49,9 +49,10 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.special import pdtrc
 
-from agents.base import EpisodeContext, Option, Policy, register
-from agents.forecast import PROVIDERS, make_provider
+from agents.base import Option, Policy, register
+from agents.forecast_providers import PROVIDERS, make_provider
 from agents.match import Matching, match_options, match_requests, matched_controls
+from city.episode import EpisodeContext
 from city.errors import ConfigError
 from city.forecast import Forecast, ForecastProvider
 from city.graph import City

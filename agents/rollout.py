@@ -43,14 +43,14 @@ request as it drives towards it, so only pickups and nearer arrivals
 re-plan it); the requests nearest to each node are listed once per
 decision; and with ``prune`` (a radius in hops, ``2 (H + 1)`` by default)
 taxis and requests farther than that from the deciding agent are left out.
-Every shortcut but pruning is exact (``tests/test_rollout.py`` compares the
+Every shortcut but pruning is exact (``tests/agents/test_rollout.py`` compares the
 costs with the simulator); pruning is validated there to reproduce the
 unpruned decisions on seeded states.  The exact savings of
 :class:`Shortcuts` (skip a decision no candidate can change, replay the
 non-pickup candidates for the agent alone, leave out taxis that cannot reach
 a pickup, transposed distance rows, one nearest-request search per node and
 step, nearest-request lists made as taxis need them) are switchable, and
-``tests/test_planning_speed.py`` shows each leaves every decision as it was,
+``tests/agents/test_planning_speed.py`` shows each leaves every decision as it was,
 with and without the approximations.  Two approximations are settings, off in
 a bare :class:`RolloutConfig` and on in the ``surge`` policy's defaults:
 ``adaptive`` (successive elimination of candidates on paired differences) and

@@ -34,7 +34,7 @@ import numpy as np
 
 from agents.base import EpisodeContext, Option, Policy, register, split_policy
 from agents.demand_tables import DemandTables
-from agents.forecast import PROVIDERS, make_provider
+from agents.forecast_providers import PROVIDERS, make_provider
 from agents.rollout import StepContext, plan_agent, prepare_step
 from agents.rollout_config import BASES, CE_MODES, SCOPES, RolloutConfig, default_prune
 from agents.shortcuts import PlanStats, Shortcuts
@@ -43,7 +43,6 @@ from city.errors import ConfigError
 from city.forecast import Forecast, ForecastProvider
 from city.graph import City
 from city.sim import Observation
-
 
 #: ``cap`` or ``adaptive`` not given: the policy's default, which may be on (``None`` is off).
 DEFAULT = object()

@@ -25,7 +25,13 @@ import numpy as np
 
 from agents.demand_tables import DemandTables
 from agents.rollout_config import POOLED_CE, RolloutConfig
-from bus.checks import Bounds, Rejections, check_dropoffs, check_forecast, check_sector_forecast
+from bus.checks import (
+    Bounds,
+    Rejections,
+    check_dropoffs,
+    check_forecast,
+    check_sector_forecast,
+)
 from bus.keys import Keys
 from bus.session import Inbox
 from bus.wire import Dropoffs, ForecastMsg, SectorForecast, decode

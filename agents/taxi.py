@@ -44,13 +44,40 @@ import numba
 import numpy as np
 
 from agents.cores import CoreShare
-from agents.rollout import RolloutConfig, StepContext, candidate_controls, plan_agent, prepare_step, set_kernel_threads, warm_up
+from agents.rollout import (
+    RolloutConfig,
+    StepContext,
+    candidate_controls,
+    plan_agent,
+    prepare_step,
+    set_kernel_threads,
+    warm_up,
+)
 from agents.sector_forecasts import AgentForecasts, needed_sectors
-from bus.checks import Bounds, Rejections, check_choice, check_spec, check_state, check_stop, check_turn
+from bus.checks import (
+    Bounds,
+    Rejections,
+    check_choice,
+    check_spec,
+    check_state,
+    check_stop,
+    check_turn,
+)
 from bus.delta import StateView
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
-from bus.wire import Ack, Control, ForecastMsg, RunSpec, Snapshot, State, Stop, Turn, WireError, decode
+from bus.wire import (
+    Ack,
+    Control,
+    ForecastMsg,
+    RunSpec,
+    Snapshot,
+    State,
+    Stop,
+    Turn,
+    WireError,
+    decode,
+)
 from city.errors import ConfigError, SurgeError
 from city.fingerprint import city_sha256, code_version
 

@@ -14,8 +14,8 @@ decision, are the same whatever ``i`` commits, and ``j`` does not wait for it.
 The waves are the levels of this graph: an agent's wave is one more than the
 latest wave among the predecessors it depends on.  Agents of one wave can
 plan concurrently once the earlier waves are committed, and the result is
-the same as strictly sequential turns (``tests/test_planning_speed.py``,
-``tests/test_waves.py``).  The number of waves is the critical path of the
+the same as strictly sequential turns (``tests/agents/test_planning_speed.py``,
+``tests/agents/test_waves.py``).  The number of waves is the critical path of the
 minute.  This module is the one place that decides it, for the in-process
 policy (threads, ``workers``) and for the distributed coordinator, which
 releases each agent's turn as soon as its ``depends`` have committed and

@@ -33,7 +33,18 @@ from __future__ import annotations
 from collections import defaultdict
 
 from bus.certs import taxi_name
-from bus.keys import COORDINATOR, PREDICTOR, PUB, QUERYABLE, SCHEME, TAXI, TOKEN, Channel, key, root
+from bus.keys import (
+    COORDINATOR,
+    PREDICTOR,
+    PUB,
+    QUERYABLE,
+    SCHEME,
+    TAXI,
+    TOKEN,
+    Channel,
+    key,
+    root,
+)
 
 INGRESS, EGRESS = "ingress", "egress"
 #: (use, writing?) -> [(flow, messages)]

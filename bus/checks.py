@@ -21,7 +21,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from bus.keys import Keys
-from bus.wire import Ack, Control, Dropoffs, ForecastMsg, RunSpec, SectorForecast, State, Stop, Turn, WireError
+from bus.wire import (
+    Ack,
+    Control,
+    Dropoffs,
+    ForecastMsg,
+    RunSpec,
+    SectorForecast,
+    State,
+    Stop,
+    Turn,
+    WireError,
+)
 
 #: The largest values a sane message carries: minutes a taxi stays busy, and the reported seconds and megabytes.
 MAX_BUSY = 24 * 60

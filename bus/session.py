@@ -13,7 +13,6 @@ router enforces the access rules of :mod:`bus.access`.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import queue
@@ -102,24 +101,6 @@ class SessionArgs:
         return conf
 
 
-def add_session_args(p: argparse.ArgumentParser, mode: str = "client") -> None:
-    """``--mode``, ``--connect``, ``--listen``, ``--config`` and ``--multicast``, as zenoh's examples take them."""
-    p.add_argument("--mode", choices=MODES, default=mode, help=f"zenoh session mode (default: {mode})")
-    p.add_argument("--connect", "-e", action="append", default=[], metavar="ENDPOINT", help="endpoint to connect to, e.g. tcp/10.0.0.1:7447")
-    p.add_argument("--listen", "-l", action="append", default=[], metavar="ENDPOINT", help="endpoint to listen on")
-    p.add_argument("--config", default=None, help="zenoh JSON5 config file (the flags above override it)")
-    p.add_argument("--multicast", action="store_true", help="allow multicast scouting (off: endpoints are explicit)")
-    add_security_args(p)
-
-
-def add_security_args(p: argparse.ArgumentParser) -> None:
-    """``--certs DIR`` (mutual TLS and access control, the default way to run) and ``--insecure``."""
-    p.add_argument("--certs", default=None, metavar="DIR",
-                   help="the fleet's credentials (made by `surge certs`): mutual TLS, and access control at the router")
-    p.add_argument("--insecure", action="store_true",
-                   help="run the bus without TLS or access control (anyone who reaches the router can steer the fleet)")
-
-
 #: Where a client looks for its router, and where a router listens, unless told otherwise.
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 #: The same on a secured bus.
@@ -130,41 +111,6 @@ INSECURE_WARNING = "surge: warning: --insecure: the bus runs without TLS or acce
 def warn_insecure() -> None:
     """The one line an insecure run prints."""
     print(INSECURE_WARNING, file=sys.stderr, flush=True)
-
-
-def security(args: argparse.Namespace) -> str | None:
-    """The credentials directory of ``--certs``, or ``None`` under ``--insecure`` (after its warning); neither is an error."""
-    certs, insecure = getattr(args, "certs", None), getattr(args, "insecure", False)
-    if certs is not None and insecure:
-        raise ConfigError("--certs and --insecure: choose one")
-    if certs is None and not insecure:
-        raise ConfigError("the bus runs with mutual TLS and access control: pass --certs DIR "
-                          "(make it with `surge certs --out DIR --taxis N`), or --insecure to run without")
-    if insecure:
-        warn_insecure()
-    return certs
-
-
-def session_args(args: argparse.Namespace, identity: str | None = None, run: str | None = None) -> SessionArgs:
-    """Session settings from the shared flags, presenting ``identity``'s credentials (a router may scope its rules to ``run``).
-
-    A client with no ``--connect`` (or a router with no ``--listen``) uses the default endpoint.
-    """
-    SessionArgs(mode=args.mode, connect=list(args.connect), listen=list(args.listen))  # the flags' own errors first
-    if args.config is not None and not Path(args.config).is_file():
-        raise ConfigError(f"zenoh config {args.config}: no such file")
-    certs = security(args)
-    default = DEFAULT_ENDPOINT if certs is None else DEFAULT_TLS_ENDPOINT
-    connect, listen = list(args.connect), list(args.listen)
-    if args.mode == "client" and not connect and args.config is None:
-        connect = [default]
-    if args.mode == "router" and not listen and args.config is None:
-        listen = [default]
-    out = SessionArgs(mode=args.mode, connect=connect, listen=listen, config=args.config, multicast=args.multicast,
-                      certs=certs, identity=identity if certs is not None else None, run=run)
-    if certs is not None and identity is not None:
-        out.overrides()  # a missing credential file is one line now, not a failure in a spawned process
-    return out
 
 
 @contextmanager

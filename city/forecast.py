@@ -21,7 +21,7 @@ The providers here need only a demand world:
     The world's own expected rate λ / 60 for the hour: a perfect forecast,
     an upper bound for ablations.
 
-The trained predictor (``model``) is registered by :mod:`agents.forecast`.
+The trained predictor (``model``) is registered by :mod:`agents.forecast_providers`.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Scenarios by name or file: the city plus its demand world, the city built once and cached on disk.
 
 ``synthetic`` is embedded.  Every other scenario is a scenario file
-(:mod:`city.scenario_file`): ``nyc`` and ``manhattan`` are files shipped in
+(:mod:`city.io.scenario_file`): ``nyc`` and ``manhattan`` are files shipped in
 ``city/scenarios/`` that point into a data directory (``--data``), and any
 ``PATH.toml`` is a user's own city.
 """
@@ -19,7 +19,7 @@ import numpy as np
 
 from city.errors import ConfigError
 from city.graph import City
-from city.scenario_file import ScenarioSpec, read_scenario_file
+from city.io.scenario_file import ScenarioSpec, read_scenario_file
 
 #: Scenario files shipped in the package, by name.
 SHIPPED = ("nyc", "manhattan")
@@ -36,7 +36,7 @@ class Scenario:
     """A city, its demand world, and the scenario file it came from (``None`` for ``synthetic``).
 
     ``schedules`` are the file's occupancy schedules (the shape of
-    :data:`city.occupancy.SCHEDULES`), ``None`` for the built-in ones.
+    :data:`city.io.occupancy.SCHEDULES`), ``None`` for the built-in ones.
     """
 
     name: str
@@ -130,7 +130,13 @@ def load_city(name: str, data_dir: Path | str | None = None, *, use_cache: bool 
 
 def build_city(spec: ScenarioSpec) -> City:
     """The street graph of a scenario file: its streets clipped to its zones, one sector per zone."""
-    from city.nyc import build_zone_map, check_zone_polygons, read_zone_file, zone_ids_in_group, zone_names_in_groups
+    from city.io.street_map import (
+        build_zone_map,
+        check_zone_polygons,
+        read_zone_file,
+        zone_ids_in_group,
+        zone_names_in_groups,
+    )
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -163,7 +169,7 @@ def build_city(spec: ScenarioSpec) -> City:
 
 def read_streets(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
     """``(osmid, xy, u, v, length, source)`` of the scenario's street network, ``xy`` taken to lon/lat by pyproj."""
-    from city.nyc import read_graphml, read_street_csv
+    from city.io.street_map import read_graphml, read_street_csv
 
     s = spec.streets
     if s.graphml is not None:
@@ -180,9 +186,9 @@ def read_streets(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray
         to_lonlat = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
         xy = np.column_stack(to_lonlat.transform(xy[:, 0], xy[:, 1]))
     return osmid, xy, u, v, length, source
-def load_zone_profile(path: Path, city: City):  # noqa: ANN201 - city.trips.ZoneProfile, imported lazily
-    """:func:`city.trips.read_zone_profile`, cached on disk by file and city (the CSV takes seconds to parse)."""
-    from city.trips import ZoneProfile, read_zone_profile
+def load_zone_profile(path: Path, city: City):  # noqa: ANN201 - city.io.trips.ZoneProfile, imported lazily
+    """:func:`city.io.trips.read_zone_profile`, cached on disk by file and city (the CSV takes seconds to parse)."""
+    from city.io.trips import ZoneProfile, read_zone_profile
 
     st = path.stat()
     key = hashlib.sha256(f"{path.resolve()}|{st.st_size}|{st.st_mtime_ns}|{CITY_VERSION}|{city.sector_ids.tolist()}".encode())
@@ -255,17 +261,17 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
 
     calendar = {"holidays": (spec.holidays["country"], spec.holidays["subdiv"]), "schedules": None}
     if spec.occupancy is not None:
-        from city.occupancy import read_occupancy_csv
+        from city.io.occupancy import read_occupancy_csv
 
         calendar["schedules"] = read_occupancy_csv(spec.occupancy)
     weather = pois = None
     if spec.weather is not None:
-        from city.weather import read_weather_csv
+        from city.io.weather import read_weather_csv
 
         w = spec.weather
         weather = read_weather_csv(w.file, station=w.station or "LGA", year=year, columns=w.columns, timezone=spec.timezone)
     if spec.pois is not None:
-        from city.poi import read_poi_csv
+        from city.io.poi import read_poi_csv
 
         pois = read_poi_csv(spec.pois.file, borough=spec.pois.borough, types=spec.pois.types)
     trips = next((t for t in spec.trips if t.files), None)
@@ -274,7 +280,7 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
         return synthetic_world(city, year=year, seed=seed, weather=weather, pois=pois, zone_profile=profile,
                                share=share or trips.share or FLEET_SHARE, **calendar)
     if trips is not None:
-        from city.trips import read_fhvhv
+        from city.io.trips import read_fhvhv
 
         table = read_fhvhv(list(trips.files), city)
         keep = share if share is not None else trips.share
@@ -286,8 +292,8 @@ def build_world(spec: ScenarioSpec, city: City, *, year: int = 2022, seed: int =
 
 
 def sample_trips(table, share: float, seed: int):  # noqa: ANN001, ANN201
-    """A seeded ``share`` of the trips of a :class:`city.trips.TripTable` (each kept with probability ``share``)."""
-    from city.trips import TripTable
+    """A seeded ``share`` of the trips of a :class:`city.io.trips.TripTable` (each kept with probability ``share``)."""
+    from city.io.trips import TripTable
 
     keep = np.random.default_rng([seed, 14]).random(len(table)) < share
     return TripTable(request_time=table.request_time[keep], pickup_sector=table.pickup_sector[keep],
@@ -299,7 +305,7 @@ def read_scenario_events(spec: ScenarioSpec, city: City) -> list:
     ev = spec.events
     if ev is None:
         return []
-    from city.events import read_events, read_permitted_events
+    from city.io.events import read_events, read_permitted_events
 
     if ev.kind == "permitted":
         return read_permitted_events(ev.file, city, borough=ev.borough)

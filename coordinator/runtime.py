@@ -13,9 +13,9 @@ policy's control for that minute, which is what the in-process rollout
 assumes for the agents after the decider, and the run goes on.  A restarted
 agent rejoins from a snapshot.  With every agent answering, the decisions are
 those of the in-process policy of the same seed, bit for bit
-(``tests/test_runtime.py``).
+(``tests/coordinator/test_runtime.py``).
 
-It survives faults (``tests/test_faults.py``): it holds a liveliness token
+It survives faults (``tests/coordinator/test_faults.py``): it holds a liveliness token
 that agents watch, publishes :class:`~bus.wire.Stop` with the reason on
 every way out, checkpoints each minute to its run directory
 (:mod:`coordinator.checkpoint`, ``--resume``), and tells a partition from
@@ -43,18 +43,44 @@ from agents.base import EpisodeContext, make_policy, policy_class
 from agents.rollout import RolloutConfig, base_controls, candidate_controls
 from agents.rollout_policy import RolloutPolicy
 from agents.waves import Waves, plan_waves
-from bus.checks import Bounds, Rejections, check_ack, check_choice, check_control, check_forecast
+from bus.checks import (
+    Bounds,
+    Rejections,
+    check_ack,
+    check_choice,
+    check_control,
+    check_forecast,
+)
 from bus.delta import state_message
-from bus.forecasts import ForecastPublisher, sector_message
+from bus.forecast_messages import ForecastPublisher, sector_message
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
-from bus.wire import ENCODING, Ack, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
+from bus.wire import (
+    ENCODING,
+    Ack,
+    Control,
+    ForecastMsg,
+    ForecastRequest,
+    RunSpec,
+    Snapshot,
+    Stop,
+    Turn,
+    WireError,
+    decode,
+)
 from city.errors import ConfigError
 from city.fingerprint import city_sha256, code_version
 from city.forecast import Forecast
 from city.sim import FleetSim, Observation, Requests, decisions_hash
 from coordinator import checkpoint
-from coordinator.faults import ACK_WAIT_S, RESEND_S, SETTLE_S, Health, PartitionError, agents_text
+from coordinator.faults import (
+    ACK_WAIT_S,
+    RESEND_S,
+    SETTLE_S,
+    Health,
+    PartitionError,
+    agents_text,
+)
 from coordinator.metrics import Counted
 
 
@@ -86,8 +112,8 @@ class FleetConfig:
 
     def instance(self) -> tuple[Any, Requests, np.ndarray, EpisodeContext]:
         """The scenario, requests, start positions and episode context of this run: one place for both runs that must agree."""
+        from city.episode import episode_requests, initial_positions
         from city.scenario import load_scenario
-        from coordinator.evaluate import episode_requests, initial_positions
 
         scen = load_scenario(self.scenario, self.data_dir, seed=self.world_seed)
         date = dt.date.fromisoformat(self.date)

@@ -1,9 +1,9 @@
 """Event-informed demand prediction (paper §4.2): embeddings, clustering, networks, forecasts.
 
 This package is the only one in surge that imports torch, and it does so lazily:
-importing ``predictor`` (or ``predictor.cli``) pulls in nothing heavy.  The torch
+importing ``predictor`` (or ``coordinator.cli.predictor``) pulls in nothing heavy.  The torch
 code lives in :mod:`predictor.nets`, :mod:`predictor.train` and
-:mod:`predictor.forecast`; the embedding model is loaded by :mod:`predictor.embed`
+:mod:`predictor.forecaster`; the embedding model is loaded by :mod:`predictor.embed`
 only when texts actually need embedding (the on-disk cache answers otherwise).
 
 Modules

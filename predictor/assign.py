@@ -1,12 +1,12 @@
 """Demand assignment (paper §4.2.2): sector demand → intersections, and β.
 
 * ρ, δ: ``O(j, h) = Σ_λ n_λ(j) · p_λ(h) · o_λ`` from the world's locale counts
-  and the occupancy schedules of :mod:`city.occupancy`, normalised over each
+  and the occupancy schedules of :mod:`city.io.occupancy`, normalised over each
   sector's pickup intersections.  The paper uses the same O for pickup and
   drop-off, so ρ = δ here.
 * β: relative frequency of drop-off sector given pickup sector in historical
   trips of the training months only (January–June: validation and test months
-  never enter).  From a :class:`city.trips.TripTable` when one is given (its
+  never enter).  From a :class:`city.io.trips.TripTable` when one is given (its
   trips requested in the training months); otherwise from the world's own
   requests on ``days`` randomly drawn days of the training months (all 24
   hours of each).  Pickup sectors without trips get a uniform row.
@@ -18,7 +18,7 @@ import datetime as dt
 
 import numpy as np
 
-from city.occupancy import day_type, occupancy, sector_distribution
+from city.io.occupancy import day_type, occupancy, sector_distribution
 from predictor.dataset import TRAIN_MONTHS
 
 
@@ -33,7 +33,10 @@ def node_distribution(city, locale_counts: np.ndarray, when: dt.datetime, schedu
 
 def estimate_beta(world, *, days: int = 28, seed: int = 0, trips=None) -> tuple[np.ndarray, dict]:
     """β ``(S, S)`` (rows sum to 1) and a description of where it came from."""
-    from city.trips import in_months, od_frequencies  # pyarrow: only where β is estimated, never in an agent
+    from city.io.trips import (  # pyarrow: only where β is estimated, never in an agent
+        in_months,
+        od_frequencies,
+    )
 
     city = world.city
     S = int(city.n_sectors)

@@ -46,8 +46,8 @@ from typing import Sequence
 
 import numpy as np
 
-from predictor.cluster import GAMMA, N_CLUSTERS, Q_MAX, review_representation
 from city.calendar import holidays_for
+from predictor.spectral import GAMMA, N_CLUSTERS, Q_MAX, review_representation
 
 N_TEMPORAL = 24 + 7 + 2 + 1
 WEATHER_NAMES = ("temp_f", "precip_in", "wind_mph")
@@ -213,7 +213,7 @@ class MetadataFeaturizer:
     """Event metadata of a sector-hour, with no text: the metadata network's input.
 
     Columns: the number of active events; per category of
-    :data:`city.events.CATEGORIES` (and one for any other) the number of
+    :data:`city.io.events.CATEGORIES` (and one for any other) the number of
     active events; ``log1p`` of the summed and of the largest venue capacity
     of the active events; the number whose venue capacity is unknown.  The
     capacity is the venue's (``world.venues``), announced before the event;
@@ -221,7 +221,7 @@ class MetadataFeaturizer:
     """
 
     def __init__(self, capacity: dict[str, float] | None = None) -> None:
-        from city.events import CATEGORIES
+        from city.io.events import CATEGORIES
 
         self.categories = tuple(CATEGORIES)
         self.capacity = dict(capacity or {})

@@ -52,7 +52,7 @@ class RealInputsWorld:
     def hourly_counts(self):
         if self._trips is None:
             return self._base.hourly_counts()
-        from city.trips import hourly_counts
+        from city.io.trips import hourly_counts
 
         return hourly_counts(self._trips, int(self._base.year), int(self._base.city.n_sectors))
 
@@ -66,7 +66,7 @@ def has_synthetic_events(world) -> bool:
 
 def read_event_file(path: Path, city, reviews: Path | None = None) -> list:
     """Events from a user file: the NYC permitted-events CSV, or surge's CSV/JSON listing."""
-    from city.events import read_events, read_permitted_events
+    from city.io.events import read_events, read_permitted_events
 
     if not path.is_file():
         raise ConfigError(f"--events: {path} does not exist")
@@ -95,7 +95,7 @@ def load_world(scenario: str, data_dir: str | None, *, seed: int = 0, year: int 
     if events:
         ev = read_event_file(Path(events), world.city, Path(reviews) if reviews else None)
     if trips:
-        from city.trips import read_fhvhv
+        from city.io.trips import read_fhvhv
 
         tr = read_fhvhv([Path(p) for p in trips], world.city)
     if ev is not None or tr is not None:

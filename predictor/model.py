@@ -26,7 +26,6 @@ import numpy as np
 import torch
 
 from city.errors import ConfigError, DataError
-from predictor.cluster import GAMMA, N_CLUSTERS, Q_MAX
 from predictor.dataset import (
     Normaliser,
     YearData,
@@ -36,8 +35,19 @@ from predictor.dataset import (
     standard_training_set,
 )
 from predictor.embed import Embedder
-from predictor.features import LAG_HOURS, LEAD_HOURS, EventFeaturizer, MetadataFeaturizer, N_TEMPORAL, WEATHER_NAMES, temporal_features, temporal_names, weather_at
+from predictor.features import (
+    LAG_HOURS,
+    LEAD_HOURS,
+    N_TEMPORAL,
+    WEATHER_NAMES,
+    EventFeaturizer,
+    MetadataFeaturizer,
+    temporal_features,
+    temporal_names,
+    weather_at,
+)
 from predictor.nets import EVENT_HIDDEN, STANDARD_HIDDEN, DemandMLP, configure_threads
+from predictor.spectral import GAMMA, N_CLUSTERS, Q_MAX
 from predictor.train import TrainConfig, fit, predict, resolve_device, versions
 
 SCHEMA = "surge.predictor.model/2"

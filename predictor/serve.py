@@ -3,7 +3,7 @@
 With it, the coordinator asks for each hour's forecast over zenoh instead of
 computing it, so the trained model (and torch) lives in this one process.
 The service publishes the hour's forecast sector by sector for the taxis
-(:mod:`bus.forecasts`), then answers the coordinator with the whole of it,
+(:mod:`bus.forecast_messages`), then answers the coordinator with the whole of it,
 which the coordinator keeps for snapshots.
 Any forecast provider can be served (``model`` is the point; ``true-rate`` and
 ``previous-hour`` need no training and make the service easy to try).  A bad
@@ -15,11 +15,10 @@ from __future__ import annotations
 import datetime as dt
 import sys
 from dataclasses import dataclass
-
 from pathlib import Path
 from typing import Any
 
-from bus.forecasts import ForecastPublisher
+from bus.forecast_messages import ForecastPublisher
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session
 from bus.wire import ENCODING, ForecastMsg, ForecastRequest, decode
@@ -100,7 +99,7 @@ def _provider(name: str, model: str | None) -> Any:
         if model is None or not Path(model).is_dir():
             raise ConfigError(f"forecast 'model' needs a trained predictor: run `surge predictor train …` and pass --model DIR"
                               f"{'' if model is None else f' ({model} is not a directory)'}")
-        from predictor.forecast import load_forecaster
+        from predictor.forecaster import load_forecaster
 
         return load_forecaster(model)
     if name not in PROVIDERS:
@@ -111,7 +110,7 @@ def _provider(name: str, model: str | None) -> Any:
 def _world_for_model(config: ServeConfig, world):
     """The served world with the model's recorded events and trips in place of the scenario's own.
 
-    The forecasts come from the model's events anyway (:class:`predictor.forecast.ModelForecaster`);
+    The forecasts come from the model's events anyway (:class:`predictor.forecaster.ModelForecaster`);
     swapping them in here also refuses, in one line, a recorded file that is gone or changed, before
     the first query, and a model trained on another scenario.
     """

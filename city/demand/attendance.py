@@ -2,7 +2,7 @@
 
 The order matters and is the point of this module.  :func:`write_events`
 turns each :class:`~city.demand.venues.EventSpec` into an
-:class:`~city.events.Event` whose title, description and reviews use only
+:class:`~city.io.events.Event` whose title, description and reviews use only
 what is known before the event: what the organiser announces (category,
 headliner, venue and capacity, "sold out", "final day"; the popularity tier
 stands for ticket sales) and reviews of the performer's or production's
@@ -27,8 +27,8 @@ from scipy.special import gammainc
 
 from city import texts
 from city.demand.venues import COMMUNITY_KINDS, EventSpec
-from city.events import Event, Venue
-from city.weather import HourlyWeather, hours_in_year
+from city.io.events import Event, Venue
+from city.io.weather import HourlyWeather, hours_in_year
 
 #: Taxi and ride-hail trips per attendee (all operators), arriving and departing, by category.
 #: An assumption, not a measurement: about a third of the attendees of ticketed Manhattan events

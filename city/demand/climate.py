@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from city.demand.dates import evaluation_date
-from city.weather import HourlyWeather, hours_in_year
+from city.io.weather import HourlyWeather, hours_in_year
 
 
 def synthetic_weather(year: int, seed: int) -> HourlyWeather:

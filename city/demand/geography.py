@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from city.graph import City
-from city.occupancy import LOCALE_TYPES
-from city.poi import Pois
-from city.poi import locale_counts as poi_counts
+from city.io.occupancy import LOCALE_TYPES
+from city.io.poi import Pois
+from city.io.poi import locale_counts as poi_counts
 
 #: Target mean trip length of the gravity OD matrix, in hops.
 TARGET_TRIP_HOPS = 15.0

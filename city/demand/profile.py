@@ -33,7 +33,7 @@ import numpy as np
 
 from city.demand.climate import weather_factor
 from city.demand.dates import day_kind
-from city.weather import HourlyWeather
+from city.io.weather import HourlyWeather
 
 #: Citywide base requests per hour at the reference point (the mean weekday at 19:00, dry
 #: weather, month factor 1) at the default share.  Sized for a 100-taxi fleet on the ≈2,200-node
@@ -128,7 +128,7 @@ def derive_tables(od_csv: Path | str, yellow_csv: Path | str, daily_csv: Path | 
     """Recompute :data:`PROFILE` and :data:`MONTH_FACTOR` from the real files (as the module docstring says)."""
     import pandas as pd
 
-    from city.trips import business_days
+    from city.io.trips import business_days
 
     od = pd.read_csv(od_csv, usecols=["dow", "t_15min", "n_trips"])
     n_days = business_days(2018).astype(float)

@@ -1,4 +1,4 @@
-"""A demand world replayed from real trip records (:class:`city.trips.TripTable`)."""
+"""A demand world replayed from real trip records (:class:`city.io.trips.TripTable`)."""
 
 from __future__ import annotations
 
@@ -12,13 +12,13 @@ from city.demand.dates import HOLIDAY_COUNTRY
 from city.demand.geography import find_anchors, locale_counts
 from city.demand.world import DemandWorld, HourTrips, check_seed_year
 from city.errors import ConfigError
-from city.events import Event, Venue
 from city.graph import City
-from city.poi import Pois
-from city.weather import HourlyWeather
+from city.io.events import Event, Venue
+from city.io.poi import Pois
+from city.io.weather import HourlyWeather
 
 if TYPE_CHECKING:
-    from city.trips import TripTable
+    from city.io.trips import TripTable
 
 
 class RecordedWorld(DemandWorld):
@@ -53,7 +53,7 @@ class RecordedWorld(DemandWorld):
         holidays: tuple[str, str | None] = (HOLIDAY_COUNTRY, None),
         schedules: dict | None = None,
     ) -> None:
-        from city.trips import hourly_counts, od_matrix
+        from city.io.trips import hourly_counts, od_matrix
 
         check_seed_year(seed, year)
         notes: list[str] = []
@@ -104,6 +104,6 @@ class RecordedWorld(DemandWorld):
 
     def beta_from_months(self, months: tuple[int, ...]) -> np.ndarray:
         """β from the records of ``months`` only (e.g. the training months)."""
-        from city.trips import od_matrix
+        from city.io.trips import od_matrix
 
         return od_matrix(self._trips, self.city.n_sectors, months=months)

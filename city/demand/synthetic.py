@@ -21,17 +21,23 @@ import numpy as np
 from city.demand.attendance import draw_attendance, event_trips, surges, write_events
 from city.demand.climate import synthetic_weather
 from city.demand.dates import HOLIDAY_COUNTRY, day_kind
-from city.demand.geography import busyness, find_anchors, gravity_od, intensity_and_tilt, locale_counts
+from city.demand.geography import (
+    busyness,
+    find_anchors,
+    gravity_od,
+    intensity_and_tilt,
+    locale_counts,
+)
 from city.demand.profile import FLEET_SHARE, base_rate, profile_base_rate
 from city.demand.venues import make_venues, schedule
 from city.demand.world import DemandWorld, HourTrips, check_seed_year
 from city.errors import ConfigError
 from city.graph import City
-from city.poi import Pois
-from city.weather import HourlyWeather
+from city.io.poi import Pois
+from city.io.weather import HourlyWeather
 
 if TYPE_CHECKING:
-    from city.trips import ZoneProfile
+    from city.io.trips import ZoneProfile
 
 
 class SyntheticWorld(DemandWorld):
@@ -57,7 +63,7 @@ class SyntheticWorld(DemandWorld):
     demand_scale : float
         Multiplies all demand (base and surges); 1.0 is calibrated for 100 taxis.
     zone_profile : ZoneProfile, optional
-        Real zone-to-zone trip rates (:func:`city.trips.read_zone_profile`) for the base demand and β.
+        Real zone-to-zone trip rates (:func:`city.io.trips.read_zone_profile`) for the base demand and β.
     share : float
         The fleet's share of the real market (default :data:`~city.demand.profile.FLEET_SHARE`, ≈ 1.7 %):
         it scales the zone profile's trips, or the real profile's 19 h level on a map without one,
@@ -65,7 +71,7 @@ class SyntheticWorld(DemandWorld):
     holidays : (country, subdivision)
         Whose public holidays run on a Sunday profile (the ``holidays`` package); US federal by default.
     schedules : dict, optional
-        Occupancy schedules (:func:`city.occupancy.read_occupancy_csv`) for the assignment of
+        Occupancy schedules (:func:`city.io.occupancy.read_occupancy_csv`) for the assignment of
         requests to intersections; the built-in DOE ones otherwise.
     """
 

@@ -19,9 +19,9 @@ import numpy as np
 from city import texts
 from city.demand.dates import evaluation_date
 from city.demand.geography import random_nodes
-from city.events import Venue
 from city.graph import City
-from city.weather import hours_in_year
+from city.io.events import Venue
+from city.io.weather import hours_in_year
 
 VENUE_PLAN: tuple[tuple[str, int, int, int], ...] = (
     # (kind, count, min capacity, max capacity)

@@ -24,12 +24,12 @@ import numpy as np
 
 from city.demand.dates import HOLIDAY_COUNTRY, holiday_dates
 from city.errors import ConfigError
-from city.events import Event, Venue
 from city.graph import City
-from city.occupancy import day_type, occupancy, sector_distribution
-from city.poi import Pois
+from city.io.events import Event, Venue
+from city.io.occupancy import day_type, occupancy, sector_distribution
+from city.io.poi import Pois
+from city.io.weather import HourlyWeather, hours_in_year
 from city.sim import Requests
-from city.weather import HourlyWeather, hours_in_year
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,7 @@ class DemandWorld:
         Sorted by start time.
     weather : HourlyWeather
     locale_counts : ndarray, shape (n_nodes, 4)
-        n_λ(j) for the locale types of :data:`city.occupancy.LOCALE_TYPES`.
+        n_λ(j) for the locale types of :data:`city.io.occupancy.LOCALE_TYPES`.
     pois : Pois or None
         The points of interest behind ``locale_counts``.
     notes : list of str
@@ -76,7 +76,7 @@ class DemandWorld:
         a Sunday profile, and the predictor's holiday flag reads them.
     schedules : dict or None
         Occupancy schedules of a scenario's ``[occupancy]`` file, in the shape of
-        :data:`city.occupancy.SCHEDULES`; ``None`` for the built-in ones.
+        :data:`city.io.occupancy.SCHEDULES`; ``None`` for the built-in ones.
     """
 
     def __init__(

@@ -1,0 +1,1 @@
+"""Readers of users' input files, one module per input, and the scenario-file assembler."""

@@ -1,0 +1,7 @@
+"""``python -m coordinator.cli``: the ``surge`` command."""
+
+import sys
+
+from coordinator.cli import main
+
+sys.exit(main())

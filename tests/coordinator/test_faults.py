@@ -1,0 +1,515 @@
+"""Faults over a real secured router on loopback: killed and hung agents, a restarted router, a stopped or resumed coordinator.
+
+Each run is a few taxis on the synthetic city with few samples; the router,
+the sessions and the processes are real.  Agents run as plain processes
+(``AGENT``) so that the test can kill or stop exactly one of them; the test
+watches turns with a taxi's own credentials, as that taxi would.
+"""
+
+from __future__ import annotations
+
+import json
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+import pytest
+
+from bus.certs import make_certs
+from bus.router import free_tcp_port, wait_for_tcp
+from bus.session import Inbox
+from city.errors import DataError
+from coordinator.faults import Health, PartitionError
+
+CLI = [sys.executable, "-m", "coordinator.cli"]
+pytestmark = pytest.mark.usefixtures("compiled_kernels")
+
+AGENT = """
+import sys
+from agents.taxi import AgentConfig, agent_main
+from bus.session import SessionArgs
+i, run, endpoint, certs, grace = int(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4], float(sys.argv[5])
+bus = SessionArgs(mode="client", connect=[endpoint], certs=certs, identity=f"taxi-{i}")
+sys.exit(agent_main(AgentConfig(index=i, run=run, bus=bus, grace_s=grace)))
+"""
+
+
+class Logged:
+    """A process whose stderr lines are collected as they come, so a test can wait for one."""
+
+    def __init__(self, argv: list[str]) -> None:
+        self.proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        self.lines: list[str] = []
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        for line in self.proc.stderr:  # type: ignore[union-attr]
+            self.lines.append(line.rstrip("\n"))
+
+    def wait_for(self, text: str, timeout: float = 120) -> str:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for line in list(self.lines):
+                if text in line:
+                    return line
+            if self.proc.poll() is not None:
+                self._reader.join(5)
+                if not any(text in line for line in self.lines):
+                    break
+            time.sleep(0.05)
+        raise AssertionError(f"no line with {text!r} within {timeout} s; got:\n" + "\n".join(self.lines[-30:]))
+
+    def finish(self, timeout: float = 120) -> int:
+        rc = self.proc.wait(timeout)
+        self._reader.join(5)
+        return rc
+
+    @property
+    def text(self) -> str:
+        return "\n".join(self.lines)
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(10)
+
+
+class Bus:
+    """A secured router on a fixed port that the test can kill and start again."""
+
+    def __init__(self, tmp: Path, taxis: int) -> None:
+        self.certs = str(tmp / "certs")
+        make_certs(self.certs, taxis)
+        self.port = free_tcp_port()
+        self.endpoint = f"tls/127.0.0.1:{self.port}"
+        self.router: subprocess.Popen | None = None
+        self.start()
+
+    def start(self) -> None:
+        self.router = subprocess.Popen([*CLI, "router", "--certs", self.certs, "--listen", self.endpoint], stderr=subprocess.DEVNULL)
+        wait_for_tcp("127.0.0.1", self.port, 30)
+
+    def kill(self) -> None:
+        assert self.router is not None
+        self.router.kill()
+        self.router.wait(10)
+
+    @property
+    def flags(self) -> list[str]:
+        return ["--connect", self.endpoint, "--certs", self.certs]
+
+    def agent(self, i: int, run: str, grace: float) -> Logged:
+        return Logged([sys.executable, "-c", AGENT, str(i), run, self.endpoint, self.certs, str(grace)])
+
+    def watch(self, agent: int, run: str) -> Watch:
+        return Watch(self, agent, run)
+
+    def close(self) -> None:
+        if self.router is not None and self.router.poll() is None:
+            self.router.terminate()
+            self.router.wait(10)
+
+
+class Watch:
+    """A session as taxi ``agent``, as that taxi would hold one: its turns' minutes and its committed controls, in queues.
+
+    With it the test can stop the taxi's process with a turn provably
+    outstanding (:meth:`stop_with_a_turn_outstanding`), however fast it plans.
+    """
+
+    def __init__(self, bus: Bus, agent: int, run: str) -> None:
+        from bus.keys import Keys
+        from bus.session import SessionArgs, open_session
+        from bus.wire import Control, Turn, decode
+
+        self.keys = Keys(run)
+        self.turns: queue.SimpleQueue = queue.SimpleQueue()
+        self.committed: queue.SimpleQueue = queue.SimpleQueue()
+        self._ctx = open_session(SessionArgs(mode="client", connect=[bus.endpoint], certs=bus.certs, identity=f"taxi-{agent}"))
+        self.session = self._ctx.__enter__()
+        self.session.declare_subscriber(self.keys.turn(agent), lambda s: self.turns.put(decode(s.payload.to_bytes(), Turn).t))
+        self.session.declare_subscriber(self.keys.committed(agent), lambda s: self.committed.put(decode(s.payload.to_bytes(), Control)))
+
+    def stop_after_an_answer(self, agent: Logged, after: int) -> int:
+        """SIGSTOP ``agent`` once it has answered a turn of minute ``after`` or later; the latest minute it answered, as far as seen."""
+        answered = -1
+        while answered < after or not self.committed.empty():
+            if (c := self.committed.get(timeout=120)).by == "agent":
+                answered = max(answered, c.t)
+        agent.proc.send_signal(signal.SIGSTOP)
+        return answered
+
+    def stop_with_a_turn_outstanding(self, agent: Logged, after: int) -> int:
+        """:meth:`stop_after_an_answer`, then the minute of its first turn left unanswered, exactly."""
+        answered = self.stop_after_an_answer(agent, after)
+        time.sleep(0.5)  # a control it sent before it stopped is committed by now
+        while not self.committed.empty():
+            if (c := self.committed.get()).by == "agent":
+                answered = max(answered, c.t)
+        return _next_turn(self.turns, answered + 1)
+
+    def close(self) -> None:
+        self._ctx.__exit__(None, None, None)
+
+
+@pytest.fixture
+def bus(tmp_path: Path) -> Iterator[Bus]:
+    b = Bus(tmp_path, 3)
+    try:
+        yield b
+    finally:
+        b.close()
+
+
+def _coordinator(bus: Bus, run: str, *extra: str, minutes: int, deadline: float, minute_s: float) -> Logged:
+    return Logged([*CLI, "coordinator", *bus.flags, "--run", run, "--taxis", "3", "--minutes", str(minutes),
+                   "--forecast", "true-rate", "--samples", "40", "--deadline", str(deadline), "--minute-seconds", str(minute_s),
+                   "--join-timeout", "300", *extra])
+
+
+def _next_turn(turns: queue.SimpleQueue, at_least: int, timeout: float = 120) -> int:
+    deadline = time.monotonic() + timeout
+    while True:
+        t = turns.get(timeout=max(0.1, deadline - time.monotonic()))
+        if t >= at_least:
+            return t
+
+
+def test_router_restart_and_coordinator_resume_keep_the_uninterrupted_decisions(bus: Bus, tmp_path: Path) -> None:
+    """The router is killed and restarted mid-run (a partition: the clock pauses), then the coordinator is
+    SIGKILLed and resumed from its checkpoint: the decisions are those of the in-process run."""
+    from coordinator.fleet import in_process, resumed_config
+
+    run, run_dir, minutes = "faults", tmp_path / "run", 14
+    coord = _coordinator(bus, run, "--run-dir", str(run_dir), minutes=minutes, deadline=60, minute_s=0.4)
+    agents = [bus.agent(i, run, grace=90) for i in range(3)]
+    resumed = None
+    try:
+        coord.wait_for(f"minute 3/{minutes}")
+        bus.kill()
+        coord.wait_for("partition: 3 of 3 agents' tokens are gone")
+        time.sleep(1.0)
+        bus.start()
+        coord.wait_for("partition healed")
+        coord.wait_for(f"minute 8/{minutes}")
+        coord.proc.send_signal(signal.SIGKILL)
+        coord.finish(30)
+        for a in agents:
+            a.wait_for("the coordinator's token is gone")
+        out = tmp_path / "resumed.json"
+        resumed = Logged([*CLI, "coordinator", *bus.flags, "--resume", str(run_dir), "--json", str(out)])
+        assert resumed.finish(180) == 0, resumed.text
+        assert [a.finish(60) for a in agents] == [0, 0, 0], "\n".join(a.text for a in agents)
+    finally:
+        for p in (coord, resumed, *agents):
+            if p is not None:
+                p.kill()
+    result = json.loads(out.read_text())
+    assert "resuming run 'faults' at minute" in resumed.text and result["resumed_at_minute"] >= 8
+    assert all("the coordinator is back" in a.text for a in agents)
+    assert result["fallbacks"] == 0 and len(result["controls"]) == minutes
+    assert len(result["waves"]) == len(result["critical_path"]) == minutes  # the waves of the minutes before the resume, restored
+    assert result["traffic"]["received_messages"] >= sum(result["planned_per_agent"])  # and the traffic counted before it
+    assert "silent for" not in coord.text + resumed.text and "gone; base control used" not in coord.text
+    ref = in_process(resumed_config(str(run_dir)))
+    assert result["decisions_sha256"] == ref["decisions_sha256"]
+    assert result["total_cost"] == ref["total_cost"]
+
+
+def test_the_router_drill_of_bench_fleet_reports_the_pause_and_keeps_the_decisions(tmp_path: Path) -> None:
+    """`surge bench fleet --restart-router-after`: the launcher kills its own router mid-run and starts it again; the
+    coordinator records the partition it paused for, and the run still makes the in-process decisions."""
+    out = tmp_path / "drill.json"
+    run = subprocess.run([*CLI, "bench", "fleet", "--taxis", "4", "--minutes", "8", "--samples", "20", "--horizon", "4",
+                          "--forecast", "true-rate", "--hosts", "2", "--minute-seconds", "1", "--restart-router-after", "2",
+                          "--json", str(out)], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    rep = json.loads(out.read_text())
+    drill = rep["router_restart"]
+    assert rep["same_decisions"] and rep["fallbacks"] == 0
+    assert drill["killed_at"] < drill["restarted_at"] and drill["router_away_s"] >= 1.0
+    assert len(drill["partitions"]) == 1 and drill["partitions"][0]["tokens_gone"] == 4
+    assert drill["partitions"][0]["minute"] >= 2 and 0 < drill["paused_s"] <= drill["hit_minute_seconds"][0]
+    assert "router killed after minute 2" in run.stdout and "the clock paused" in run.stdout
+
+
+def test_bench_fleet_refuses_a_router_drill_outside_the_run() -> None:
+    run = subprocess.run([*CLI, "bench", "fleet", "--taxis", "2", "--minutes", "3", "--restart-router-after", "3"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode != 0 and "--restart-router-after 3: the run has minutes 1 to 2" in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1
+
+
+def test_an_interrupted_fleet_resumes_from_its_checkpoint(tmp_path: Path) -> None:
+    """`surge fleet` SIGTERMed mid-run, then `surge fleet --resume`: a new router and new agents finish the same run."""
+    run_dir, out, minutes = tmp_path / "run", tmp_path / "resumed.json", 12
+    first = Logged([*CLI, "fleet", "--taxis", "2", "--minutes", str(minutes), "--forecast", "true-rate", "--samples", "50",
+                    "--minute-seconds", "0.3", "--run-dir", str(run_dir)])
+    try:
+        assert f"--resume {run_dir}` continues the run" in first.wait_for("checkpointing each minute to")
+        first.wait_for(f"minute 5/{minutes}")
+        first.proc.send_signal(signal.SIGTERM)
+        assert first.finish(60) == 143, first.text
+    finally:
+        first.kill()
+    proc = subprocess.run([*CLI, "fleet", "--resume", str(run_dir), "--check", "--json", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "decisions identical" in proc.stdout, proc.stdout
+    result = json.loads(out.read_text())
+    assert 5 <= result["resumed_at_minute"] < minutes and len(result["controls"]) == minutes
+    assert result["same_decisions"] and result["fallbacks"] == 0
+
+
+def test_a_killed_agent_rejoins_and_a_hung_agent_costs_one_deadline(bus: Bus, tmp_path: Path) -> None:
+    """Agent 1 is SIGKILLed mid-turn and restarted; then agent 2 is SIGSTOPped mid-turn and SIGCONTed."""
+    run, minutes, deadline, out = "agents", 40, 1.5, tmp_path / "result.json"
+    coord = _coordinator(bus, run, "--json", str(out), minutes=minutes, deadline=deadline, minute_s=0.4)
+    agents = {i: bus.agent(i, run, grace=60) for i in range(3)}
+    watch = {i: bus.watch(i, run) for i in (1, 2)}
+    try:
+        coord.wait_for("all 3 agents joined")
+        t_kill = _next_turn(watch[1].turns, watch[1].stop_after_an_answer(agents[1], 2) + 1)
+        agents[1].proc.send_signal(signal.SIGKILL)  # at once, well within its turn's deadline
+        agents[1].finish(30)
+        coord.wait_for("agent 1 left")
+        agents[1] = bus.agent(1, run, grace=60)
+        coord.wait_for("agent 1 is back")
+        t_stop = watch[2].stop_with_a_turn_outstanding(agents[2], t_kill)
+        coord.wait_for("agent 2 silent for", timeout=60)
+        time.sleep(2 * deadline)  # minutes go by with agent 2 suspect
+        agents[2].proc.send_signal(signal.SIGCONT)
+        acked = int(coord.wait_for("agent 2 acknowledged minute").split("acknowledged minute ")[1].split(";")[0])
+        assert coord.finish(180) == 0, coord.text
+        assert [agents[i].finish(60) for i in range(3)] == [0, 0, 0], "\n".join(a.text for a in agents.values())
+    finally:
+        for w in watch.values():
+            w.close()
+        for p in (coord, *agents.values()):
+            p.kill()
+    result = json.loads(out.read_text())
+    fallen = {a: [t for t, b in result["fallback_turns"] if b == a] for a in range(3)}
+    assert fallen[0] == [] and result["fallbacks_per_agent"] == [len(fallen[a]) for a in range(3)]
+    assert fallen[1], "the killed agent's turns were not counted as fallbacks"
+    assert "joined run 'agents'" in agents[1].text, "the restarted agent did not rejoin"
+    assert "the coordinator's token is gone" not in agents[0].text  # its token goes with the stop at a normal end
+    assert "agent 1 silent for" not in coord.text  # it took its snapshot before its token: no turn of its waited out a deadline
+    assert coord.text.count("agent 2 silent for") == 1  # suspect after one deadline: no further wait, the run keeps its pace
+    assert fallen[2] and min(fallen[2]) >= t_stop and max(fallen[2]) <= acked
+    assert max(max(fallen[1]), acked) < minutes - 5, "too few minutes after the faults to show the agents recovered"
+    assert len(result["controls"]) == minutes
+
+
+def test_an_agent_back_before_its_departure_settles_gets_the_base_control_at_once(bus: Bus) -> None:
+    """Agent 1 is stopped with a turn outstanding, then killed while the coordinator is stopped too, and a process
+    declares its token at once: the coordinator sees it leave and come back in one burst.  The turn went with the
+    process that left, so it is the base control now, not a wait for the deadline (the race a fast restart hit)."""
+    run = "back"
+    coord = _coordinator(bus, run, minutes=60, deadline=60, minute_s=0.4)
+    agents = [bus.agent(i, run, grace=60) for i in range(3)]
+    watch = bus.watch(1, run)
+    try:
+        coord.wait_for("all 3 agents joined")
+        t = watch.stop_with_a_turn_outstanding(agents[1], 2)
+        coord.proc.send_signal(signal.SIGSTOP)
+        agents[1].proc.send_signal(signal.SIGKILL)
+        agents[1].finish(30)
+        token = watch.session.liveliness().declare_token(watch.keys.alive(1))  # a process back in its place at once
+        time.sleep(1.0)  # the router holds the departure and the return for the stopped coordinator
+        coord.proc.send_signal(signal.SIGCONT)
+        gone = coord.wait_for(f"minute {t}: agent 1 gone; base control used", timeout=30)
+        token.undeclare()
+    finally:
+        watch.close()
+        for p in (coord, *agents):
+            p.kill()
+    lines = coord.lines
+    assert lines.index(coord.wait_for("agent 1 left")) < lines.index(coord.wait_for("agent 1 is back")) < lines.index(gone)
+    assert "silent for" not in coord.text
+
+
+def test_a_stopped_coordinator_stops_its_agents_within_the_grace_period(bus: Bus) -> None:
+    """SIGTERM: the coordinator publishes stop and every agent leaves at once; SIGKILL: they leave after the grace period."""
+    grace = 4.0
+    for sig, run in ((signal.SIGTERM, "term"), (signal.SIGKILL, "kill")):
+        coord = _coordinator(bus, run, minutes=60, deadline=30, minute_s=0.5)
+        agents = [bus.agent(i, run, grace=grace) for i in range(3)]
+        try:
+            coord.wait_for("minute 2/60")
+            coord.proc.send_signal(sig)
+            t0 = time.monotonic()
+            codes = [a.finish(grace + 20) for a in agents]
+            took = time.monotonic() - t0
+            rc = coord.finish(30)
+        finally:
+            for p in (coord, *agents):
+                p.kill()
+        if sig == signal.SIGTERM:
+            assert rc == 143 and "published stop at minute" in coord.text
+            assert codes == [0, 0, 0] and took < grace
+            assert all("the coordinator ended the run at minute" in a.text for a in agents)
+            assert not any("the coordinator's token is gone" in a.text for a in agents)
+        else:
+            assert codes == [2, 2, 2] and grace < took < grace + 15
+            assert all(f"has been gone for more than {grace:g} s (the grace period); leaving" in a.text for a in agents)
+
+
+# ------------------------------------------------------------------ without a bus
+def test_health_tells_a_partition_from_single_departures() -> None:
+    said: list[str] = []
+    h = Health(4, said.append)
+    for a in range(4):
+        h.token(a, True, running=False)
+    h.token(3, False, running=True)
+    assert not h.partitioned() and said == ["agent 3 left"]
+    h.departed[3] -= 60  # long gone: not one of the partition's
+    h.token(2, False, running=True)
+    assert not h.partitioned()
+    h.token(1, False, running=True)
+    assert h.partitioned() and h.partition() == {0, 1, 2}
+    assert h.healed({0, 1, 2}, 5) == (False, False)
+    h.token(1, True, running=True)
+    h.token(2, True, running=True)
+    assert h.healed({0, 1, 2}, 5) == (True, False)
+    for a in (0, 1, 2):
+        h.ack(a, 5, current=5)
+    assert h.healed({0, 1, 2}, 5) == (True, True) and "agent 1 is back" in said
+    sent = time.monotonic()
+    assert not h.lost_since(1, sent) and h.lost_since(3, sent)  # 1 is back from before the turn went out; 3 is gone
+    h.token(1, False, running=True)
+    h.token(1, True, running=True)
+    assert h.lost_since(1, sent) and not h.lost_since(1, time.monotonic())  # it left after: the turn went with it
+    h.missed({2}, 6, 1.5)
+    h.ack(2, 5, current=6)
+    assert 2 in h.suspect
+    h.ack(2, 6, current=6)
+    assert 2 not in h.suspect and said[-1] == "agent 2 acknowledged minute 6; its turns are waited for again"
+
+
+def test_a_checkpoint_restores_the_run_and_a_bad_one_is_one_line(tmp_path: Path) -> None:
+    from dataclasses import asdict
+
+    from coordinator import checkpoint
+    from coordinator.runtime import Coordinator, FleetConfig
+
+    cfg = FleetConfig(run="ck", taxis=3, minutes=5, options={"forecast": "true-rate", "samples": 4}, partition_timeout_s=0.3)
+    coord = Coordinator(cfg, progress=False)
+    sim, tally = coord.sim, coord.tally
+    for t in range(3):
+        u = sim.busy_controls()
+        u[sim.state.tau == 0] = sim.state.pos[sim.state.tau == 0]
+        tally.controls[t] = u
+        tally.costs.append(sim.step(u))
+    tally.fallen.append([1, 2])
+    tally.waves.extend([[{"seconds": 0.5, "agents": [0, 2], "plan_s": [0.1, None]}]] * 3)
+    tally.traffic.sent(b"state")
+    checkpoint.save(tmp_path, asdict(cfg), sim, tally)
+    back = Coordinator(cfg, progress=False, run_dir=tmp_path, resume=True)
+    assert back.sim.state.t == 3 and np.array_equal(back.sim.state.pos, sim.state.pos)
+    assert np.array_equal(back.sim.state.picked_at, sim.state.picked_at)
+    assert np.array_equal(back.tally.controls, tally.controls) and back.tally.costs == tally.costs and back.tally.fallen == [[1, 2]]
+    assert back.tally.waves == tally.waves and back.tally.traffic == tally.traffic
+    doc = json.loads((tmp_path / checkpoint.CHECKPOINT).read_text())
+    doc["sim"]["picked_at"] = doc["sim"]["picked_at"][:-1]
+    (tmp_path / checkpoint.CHECKPOINT).write_text(json.dumps(doc))
+    with pytest.raises(DataError, match=r"checkpoint.json: field 'sim' holds \d+ requests, the run's instance has \d+"):
+        checkpoint.restore(tmp_path, back.sim, cfg.minutes)
+    (tmp_path / checkpoint.CHECKPOINT).write_text("{")
+    with pytest.raises(DataError, match="checkpoint.json: not readable as JSON"):
+        checkpoint.restore(tmp_path, back.sim, cfg.minutes)
+    with pytest.raises(DataError, match="nothing to resume"):
+        checkpoint.restore(tmp_path / "none", back.sim, cfg.minutes)
+    assert back.sim.state.t == 3  # a refused checkpoint leaves the simulator as it was
+    from bus.wire import Ack
+
+    back.obs = back.sim.observe()
+    back.health.missed({1}, 3, 1.0)
+    for key, ack in ((back.keys.ack(2), Ack(t=3, agent=1)), (back.keys.ack(1), Ack(t=99, agent=1))):
+        back._handle(("ack", key, ack.encode()))  # another agent's key; a minute outside the episode
+    assert 1 in back.health.suspect and len(back.rejected.counts) == 2
+    back._handle(("ack", back.keys.ack(1), Ack(t=3, agent=1).encode()))
+    assert 1 not in back.health.suspect
+    now = time.monotonic()
+    back.health.departed, back.health.last_departure = {0: now - 0.6, 1: now - 0.6, 2: now - 0.6}, now - 0.6
+    with pytest.raises(PartitionError, match=r"^run 'ck': partition at minute 3: 0 of 3 agents returned within 0.3 s; the run ends$"):
+        back._partition(Inbox(), 3)
+    back.health.departed = {a: when - 60 for a, when in back.health.departed.items()}
+    back.health.alive = {2}
+    assert back._partition(Inbox(), 4) is False  # worn down one agent at a time long ago: the clock goes on without them
+
+
+def _turn_rig(taxis: int, deadline_s: float):  # noqa: ANN202
+    """A coordinator without a bus, and publishers that log the turns and commits it sends, in order."""
+    from bus.wire import Control, Turn, decode
+    from coordinator.runtime import Coordinator, FleetConfig
+
+    cfg = FleetConfig(run="w", taxis=taxis, minutes=2, deadline_s=deadline_s, options={"forecast": "true-rate", "samples": 4})
+    coord = Coordinator(cfg, progress=False)
+    coord.obs = coord.sim.observe()
+    coord.health.alive = set(range(taxis))
+    events: list[tuple[str, object]] = []
+
+    class Pub:
+        def __init__(self, kind: str, cls: type) -> None:
+            self.kind, self.cls = kind, cls
+
+        def put(self, payload: bytes) -> None:
+            events.append((self.kind, decode(payload, self.cls)))
+
+    turns = {a: Pub("turn", Turn) for a in range(taxis)}
+    commits = {a: Pub("commit", Control) for a in range(taxis)}
+    return coord, turns, commits, events
+
+
+def test_a_turn_waits_for_its_live_dependencies_only_and_resends_unanswered_turns(capsys: pytest.CaptureFixture) -> None:
+    """Three independent agents: agent 1 answers at once, agent 2 is suspect (its turn is sent, not waited for), agent 0 is hung."""
+    from agents.rollout import candidate_controls
+    from agents.waves import Waves
+    from bus.wire import Control
+    from coordinator import faults
+
+    coord, turns, commits, events = _turn_rig(3, faults.RESEND_S + 0.5)
+    coord.health.suspect = {2}
+    none = np.zeros(0, dtype=np.int64)
+    waves = Waves(agents=np.array([0, 1, 2]), wave=np.zeros(3, dtype=np.int64), depends=[none, none, none])
+    base = np.array([7, 8, 9], dtype=np.int32)
+    ok = int(candidate_controls(coord.city, coord.obs, 1)[0])
+    inbox = Inbox()
+    inbox.put("control", coord.keys.control(1), Control(t=0, agent=1, control=ok).encode())
+    u = base.copy()
+    out = coord._turns(inbox, turns, commits, 0, waves, base, u)
+    assert [(k, m.agent) for k, m in events if k == "turn"] == [("turn", 0), ("turn", 1), ("turn", 2), ("turn", 0)]  # 0 again after RESEND_S
+    committed = {m.agent: (m.control, m.by) for k, m in events if k == "commit"}
+    assert committed == {0: (7, "base"), 1: (ok, "agent"), 2: (9, "base")} and u.tolist() == [7, ok, 9]
+    assert coord.health.suspect == {0, 2} and coord.tally.fallbacks.tolist() == [1, 0, 1]
+    assert capsys.readouterr().err.count("silent for") == 1
+    assert len(out) == 1 and out[0]["agents"] == [0, 1, 2] and out[0]["plan_s"][0] is None and out[0]["seconds"] >= faults.RESEND_S
+
+
+def test_a_turn_goes_out_once_its_dependencies_commit_without_waiting_for_their_wave() -> None:
+    """Agent 1 depends on agent 0 only: its turn, with 0's control, goes out before agent 2 of 0's wave answers."""
+    from agents.rollout import candidate_controls
+    from agents.waves import Waves
+    from bus.wire import Control
+
+    coord, turns, commits, events = _turn_rig(3, 5.0)
+    waves = Waves(agents=np.array([0, 1, 2]), wave=np.array([0, 1, 0]),
+                  depends=[np.zeros(0, dtype=np.int64), np.array([0]), np.zeros(0, dtype=np.int64)])
+    pick = {a: int(candidate_controls(coord.city, coord.obs, a)[-1]) for a in range(3)}
+    inbox = Inbox()
+    for a in range(3):
+        inbox.put("control", coord.keys.control(a), Control(t=0, agent=a, control=pick[a]).encode())
+    u = np.full(3, -5, dtype=np.int32)
+    out = coord._turns(inbox, turns, commits, 0, waves, u.copy(), u)
+    assert [(k, m.agent) for k, m in events] == [("turn", 0), ("turn", 2), ("commit", 0), ("turn", 1), ("commit", 1), ("commit", 2)]
+    turn1 = next(m for k, m in events if k == "turn" and m.agent == 1)
+    assert turn1.deps.tolist() == [0] and turn1.controls.tolist() == [pick[0]]
+    assert u.tolist() == [pick[0], pick[1], pick[2]] and coord.tally.fallbacks.sum() == 0
+    assert [w["agents"] for w in out] == [[0, 2], [1]] and all(w["seconds"] >= 0 for w in out)
