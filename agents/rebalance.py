@@ -32,10 +32,16 @@ Options
 -------
 forecast : ``model`` | ``previous-hour`` | ``true-rate`` (default ``previous-hour``)
     The forecast provider, as ``surge``'s; ``model`` needs ``model=DIR``.
-lookahead : int minutes (default 12)
+lookahead : int minutes (default 6)
     Horizon of the demand the slots are valued by.
-value : float hops (default 20)
-    What a slot whose demand is certain is worth, in hops of driving.
+value : float hops (default 2000)
+    What a slot whose demand is certain is worth, in hops of driving.  The
+    default is far above any drive, so the slots with the likeliest demand
+    are filled first and the drive decides between equally likely ones.
+
+The defaults (with ``match``'s ``cost=sqrt``) have the least total cost of a
+grid over ``lookahead`` and ``value`` on validation data (a July–August date
+only): ``benchmarks/practice-baselines/``.
 cost, wait_weight :
     The matching's, as ``match``'s.
 """
@@ -121,14 +127,14 @@ class Rebalance(Policy):
     options = (
         Option("forecast", str, choices=tuple(sorted(PROVIDERS)), help="forecast provider (default previous-hour)"),
         Option("model", str, noun="a directory", help="trained predictor directory for forecast=model"),
-        Option("lookahead", int, low=1, high=60, help="minutes of forecast demand the slots are valued by (default 12)"),
-        Option("value", float, low=0, help="hops a slot of certain demand is worth (default 20)"),
+        Option("lookahead", int, low=1, high=60, help="minutes of forecast demand the slots are valued by (default 6)"),
+        Option("value", float, low=0, help="hops a slot of certain demand is worth (default 2000)"),
         *match_options(),
     )
-    defaults = {"forecast": "previous-hour", "lookahead": 12, "value": 20.0}
+    defaults = {"forecast": "previous-hour", "lookahead": 6, "value": 2000.0}
 
-    def __init__(self, city: City, forecast: str | None = None, model: str | Path | None = None, lookahead: int = 12,
-                 value: float = 20.0, cost: str = "sqrt", wait_weight: float = 0.1) -> None:
+    def __init__(self, city: City, forecast: str | None = None, model: str | Path | None = None, lookahead: int = 6,
+                 value: float = 2000.0, cost: str = "sqrt", wait_weight: float = 0.1) -> None:
         super().__init__(city)
         self.provider: ForecastProvider = make_provider(forecast or self.defaults["forecast"], model)
         self.lookahead, self.value = int(lookahead), float(value)
