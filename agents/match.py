@@ -122,6 +122,7 @@ class Match(Policy):
     """Optimal assignment of free taxis to outstanding requests every minute (see the module docstring)."""
 
     name = "match"
+    central = True
     options = match_options()
 
     def __init__(self, city: City, cost: str = "sqrt", wait_weight: float = 0.1) -> None:

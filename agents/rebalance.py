@@ -124,6 +124,7 @@ class Rebalance(Policy):
     """``match`` plus forecast-driven rebalancing of idle taxis to sector slots (see the module docstring)."""
 
     name = "rebalance"
+    central = True
     options = (
         Option("forecast", str, choices=tuple(sorted(PROVIDERS)), help="forecast provider (default previous-hour)"),
         Option("model", str, noun="a directory", help="trained predictor directory for forecast=model"),
