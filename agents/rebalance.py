@@ -5,8 +5,9 @@ exactly as ``match`` does (:func:`agents.match.match_requests`); matched taxis
 keep that control.  The free taxis left over (idle) are then sent to sectors
 by a second minimum-cost assignment, a transport problem over sector
 *slots*, in the manner of real-time rebalancing (Pavone et al. 2012; Zhang &
-Pavone 2016) and of MATSim DRT's min-cost-flow rebalancing toward forecast
-demand:
+Pavone 2016), of MATSim DRT's min-cost-flow rebalancing toward forecast
+demand, and of Wallar et al. (2018)'s rebalancing of idle vehicles to regions
+by predicted demand:
 
 - the demand of sector ``s`` over the next ``lookahead`` minutes is Poisson
   with mean ``μ_s = η_s · lookahead`` (the forecast provider's rate);
