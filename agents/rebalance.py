@@ -24,10 +24,10 @@ by predicted demand:
 The assignment (``scipy.optimize.linear_sum_assignment`` over taxis × (slots
 + one stay column per taxi)) is exact; an idle taxi assigned to a slot moves
 one hop toward the sector's anchor, one assigned to stay does not move.  It
-never changes a matched or busy taxi's control.  The forecast is read at the
-episode's hour: a look-ahead that runs past the hour keeps the hour's rates
-(an hour's ``previous-hour`` forecast of the next hour would read counts of
-minutes not yet played).
+never changes a matched or busy taxi's control.  The forecast is that of the
+hour being played, as ``surge`` reads it: a look-ahead that runs past the
+hour keeps the hour's rates (a ``previous-hour`` forecast of the next hour
+would read counts of minutes not yet played).
 
 Options
 -------
@@ -142,14 +142,14 @@ class Rebalance(Policy):
         self.lookahead, self.value = int(lookahead), float(value)
         self.cost, self.wait_weight = cost, float(wait_weight)
         self.context: EpisodeContext | None = None
-        self._hour: tuple[Forecast, np.ndarray] | None = None
+        self._hours: dict[int, tuple[Forecast, np.ndarray]] = {}
         self.last_matching: Matching | None = None
         self.last_targets: np.ndarray | None = None
 
     def reset(self, context: EpisodeContext) -> None:
         if context.world is None:
             raise ConfigError(f"policy {self.name!r} needs the episode's demand world for its forecasts")
-        self.context, self._hour = context, None
+        self.context, self._hours = context, {}
 
     def forecast(self, hour_offset: int = 0) -> Forecast:
         """The provider's forecast of the hour ``hour_offset`` hours after the episode's start."""
@@ -159,11 +159,12 @@ class Rebalance(Policy):
         when = dt.datetime.combine(ctx.date, dt.time()) + dt.timedelta(hours=ctx.hour + hour_offset)
         return self.provider.forecast(ctx.world, when)
 
-    def _hour_data(self) -> tuple[Forecast, np.ndarray]:
-        if self._hour is None:
-            fc = self.forecast(0)
-            self._hour = (fc, sector_anchors(self.city, fc.rho))
-        return self._hour
+    def hour_data(self, hour_offset: int) -> tuple[Forecast, np.ndarray]:
+        """The forecast of the episode's hour ``hour_offset`` and its sectors' anchors, computed once an hour."""
+        if hour_offset not in self._hours:
+            fc = self.forecast(hour_offset)
+            self._hours = {hour_offset: (fc, sector_anchors(self.city, fc.rho))}
+        return self._hours[hour_offset]
 
     def act(self, obs: Observation) -> np.ndarray:
         m = self.last_matching = match_requests(self.city, obs, self.cost, self.wait_weight)
@@ -172,7 +173,7 @@ class Rebalance(Policy):
         self.last_targets = None
         if idle.size == 0:
             return u
-        fc, anchors = self._hour_data()
+        fc, anchors = self.hour_data(obs.t // 60)
         sectors, worth = slot_values(fc.eta * self.lookahead, covered(self.city, obs, m, self.lookahead), idle.size, self.value)
         target = rebalance_targets(self.city, obs.pos[idle], anchors, sectors, worth)
         self.last_targets = target

@@ -152,7 +152,7 @@ def test_rebalance_never_moves_a_matched_taxi_and_moves_idle_ones(synthetic) -> 
         assert np.array_equal(u[keep], v[keep])  # busy and matched taxis: exactly match's controls
         idle = np.setdiff1d(np.flatnonzero(obs.tau == 0), m.taxis)
         if idle.size:
-            fc, anchors = reb._hour_data()
+            fc, anchors = reb.hour_data(obs.t // 60)
             cover = covered(city, obs, m, reb.lookahead)
             for a, target in zip(idle, reb.last_targets):
                 if target != obs.pos[a]:
