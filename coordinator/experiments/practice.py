@@ -77,8 +77,8 @@ def report_section(doc: dict, policy: str = "surge", heading: str = "## Against 
     lines = [heading, "",
              f"`{policy}` paired with the strongest practical baseline of each hour (`match`: optimal batched matching; "
              "`rebalance`: `match` plus forecast-driven rebalancing of idle taxis), among those planning with the same "
-             "forecast as `{policy}` or with none. Verdict *yes*: the 95 % CI of the mean difference is below zero "
-             f"(at least {MIN_CLEAR} instances).".replace("{policy}", policy), ""]
+             f"forecast as `{policy}` or with none. Verdict *yes*: the 95 % CI of the mean difference is below zero "
+             f"(at least {MIN_CLEAR} instances).", ""]
     if not rows:
         return lines + ["No practical baseline shares instances with this policy in these results.", ""]
     lines += ["| hour | strongest | its mean cost | `" + policy + "` − it | 95 % CI | wins | beats it |", "|---|---|---|---|---|---|---|"]
