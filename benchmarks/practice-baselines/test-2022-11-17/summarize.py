@@ -28,8 +28,11 @@ def main() -> None:
         seeds = sorted({e["seed"] for e in doc["episodes"]})
         pairs = [compare_pair(doc, a, b, h) for a, b in PAIRS for h in (17, 19)]
         gap = {f"{r['hour']} {r['policy']}": r["gap_closed"] for r in summarize(doc) if r["policy"] in ("surge", "rebalance", "match")}
+        cpu = {p: 1e3 * sum(e["plan_cpu_seconds_per_step"] for e in doc["episodes"] if e["policy"] == p)
+               / sum(1 for e in doc["episodes"] if e["policy"] == p) for p in dict.fromkeys(e["policy"] for e in doc["episodes"])}
         out["maps"][m] = {"seeds": seeds, "pairs": [p for p in pairs if p], "verdicts": against_practice(doc, "surge"),
-                          "gap_closed": gap}
+                          "gap_closed": gap, "plan_cpu_ms_per_step": cpu}
+        print(f"{m} planning CPU ms per step: " + ", ".join(f"{p} {v:.2f}" for p, v in cpu.items()))
         for r in out["maps"][m]["pairs"]:
             print(f"{m} {r['hour']}h {r['policy']} − {r['against']}: {r['cost_difference']:+.1f} "
                   f"[{r['ci95'][0]:+.1f}, {r['ci95'][1]:+.1f}], wins {r['wins']}/{r['n']}")
