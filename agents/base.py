@@ -95,10 +95,15 @@ class Policy(ABC):
     node) or ``city.sim.PICKUP``; a busy taxi's control must be its next hop.
     ``options`` declares every keyword the constructor takes after ``city``;
     :func:`check_options` enforces it before the policy is built.
+    ``central`` marks a policy computed whole by one process (an assignment
+    over the fleet): in a distributed run the coordinator computes its joint
+    control and sends it with the state, and each taxi's turn answers its own
+    entry, so the decisions are the in-process ones.
     """
 
     name: ClassVar[str] = ""
     clairvoyant: ClassVar[bool] = False
+    central: ClassVar[bool] = False
     options: ClassVar[tuple[Option, ...]] = ()
 
     def __init__(self, city: City) -> None:
@@ -129,6 +134,8 @@ _LAZY: dict[str, str] = {
     "oracle-auction": "agents.oracle",
     "surge": "agents.rollout_policy",
     "garces2023": "agents.rollout_policy",
+    "match": "agents.match",
+    "rebalance": "agents.rebalance",
 }
 
 

@@ -49,6 +49,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from agents.base import policy_class
 from agents.cores import CoreShare
 from agents.rollout import (
     RolloutConfig,
@@ -135,6 +136,8 @@ class TaxiAgent:
         self.asked: int | None = None
         self.context: StepContext | None = None
         self.decisions = 0
+        #: Whether the run's policy is computed by the coordinator (:attr:`agents.base.Policy.central`); set by the spec.
+        self.central = False
         self.rejected = Rejections(lambda m: log(self.me, m))
         self._cities: dict[tuple[str, str | None], object] = {}
         #: The last control this agent sent, and its predecessors' controls it was planned with: a repeated turn gets it again.
@@ -196,7 +199,8 @@ class TaxiAgent:
 
     def _warm_up(self) -> None:
         """Load (or build) the compiled kernels before joining, so that a fresh checkout's first turn is not late."""
-        warm_up(self.city, self.rollout)
+        if not self.central:
+            warm_up(self.city, self.rollout)
 
     def _fetch_spec(self, session) -> RunSpec:
         """The first acceptable answer on ``spec``; the city is built from it.  A bad answer is dropped and the agent asks again."""
@@ -246,6 +250,7 @@ class TaxiAgent:
         if spec.code != code_version():
             log(self.me, f"warning: this host runs {code_version()}, the coordinator {spec.code}; decisions may differ from its reference")
         self.city, self.rollout = city, rollout
+        self.central = policy_class(spec.policy).central
         bounds = Bounds(taxis=spec.taxis, nodes=city.n_nodes, sectors=city.n_sectors, minutes=spec.minutes)
         self.forecasts = AgentForecasts(city, rollout, bounds, self.rejected)
         return spec
@@ -284,7 +289,7 @@ class TaxiAgent:
     def _follow(self) -> None:
         """Follow the sectors this taxi plans in next: where it is, or where it is free again when busy."""
         obs = self.view.obs
-        if obs is None:
+        if obs is None or self.central:
             return
         node = int(obs.pos[self.me]) if obs.tau[self.me] == 0 or obs.dest[self.me] < 0 else int(obs.dest[self.me])
         self.forecasts.forget_before(int(obs.t) // 60)
@@ -417,7 +422,7 @@ class TaxiAgent:
     def _prepare(self) -> None:
         """Build the minute's shared context as soon as the state and forecast are in, while earlier agents plan."""
         obs = self.view.obs
-        if obs is None or obs.tau[self.me] > 0:
+        if obs is None or obs.tau[self.me] > 0 or self.central:
             return
         if self.context is None or self.context.obs.t != obs.t:
             hour, sectors = int(obs.t) // 60, needed_sectors(self.city, self.rollout, int(obs.pos[self.me]))
@@ -438,16 +443,19 @@ class TaxiAgent:
         if turn is not None and obs is not None and turn.t < obs.t:
             self.pending = None  # the run has moved on without this agent's answer
             return
-        if turn is None or obs is None or obs.t != turn.t or self.context is None or self.context.obs.t != turn.t:
+        ready = self.central or (self.context is not None and self.context.obs.t == turn.t)
+        if turn is None or obs is None or obs.t != turn.t or not ready:
             return
         self.pending = None  # a turn is planned, answered again, or dropped, once
-        committed = self._predecessors(turn)
+        committed = np.empty(0, dtype=np.int32) if self.central else self._predecessors(turn)
         if self.sent is not None and self.sent.t == turn.t and np.array_equal(self.sent_with, committed):
             # a repeated turn, with the same predecessors (perhaps from a coordinator that took over): the first answer may have been lost
             out.put(dataclasses.replace(self.sent, epoch=turn.epoch).encode())
             return
         t0 = time.perf_counter()
-        if self.share is None:
+        if self.central:
+            control = int(self.view.base[self.me])  # the coordinator computed the joint control; this taxi's entry is its own
+        elif self.share is None:
             control = plan_agent(self.context, committed, self.me)
         else:
             with self.share.planning():

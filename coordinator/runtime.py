@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.base import EpisodeContext, make_policy, policy_class
+from agents.base import EpisodeContext, Policy, make_policy, policy_class
 from agents.rollout import RolloutConfig, base_controls, candidate_controls
 from agents.rollout_policy import RolloutPolicy
 from agents.waves import Waves, plan_waves
@@ -77,6 +77,7 @@ from bus.wire import (
 )
 from city.errors import ConfigError
 from city.fingerprint import city_sha256, code_version
+from city.graph import City
 from city.forecast import Forecast
 from city.sim import FleetSim, Observation, Requests, decisions_hash
 from coordinator import checkpoint
@@ -128,17 +129,21 @@ class FleetConfig:
         context = EpisodeContext(city=scen.city, date=date, hour=self.hour, minutes=self.minutes, seed=self.seed, world=scen.world)
         return scen, episode_requests(scen.world, date, self.hour, self.minutes), initial_positions(scen.city, self.taxis, self.seed), context
 
-    def policy_class(self) -> type[RolloutPolicy]:
+    def policy_class(self) -> type[Policy]:
         cls = policy_class(self.policy)
-        if not issubclass(cls, RolloutPolicy):
-            raise ConfigError(f"policy {self.policy!r}: the distributed runtime runs rollout policies (surge, garces2023)")
+        if not (issubclass(cls, RolloutPolicy) or cls.central):
+            raise ConfigError(f"policy {self.policy!r}: the distributed runtime runs rollout policies (surge, garces2023) "
+                              "and centrally computed ones (match, rebalance)")
+        if cls.central and self.predictor:
+            raise ConfigError(f"policy {self.policy!r} is computed by the coordinator, which reads its own forecast: "
+                              "a predictor service serves rollout agents only")
         return cls
 
     def forecast_name(self) -> str:
         """The forecast provider the run uses: the ``forecast`` option, or the policy's default."""
-        return str(self.options.get("forecast") or self.policy_class().defaults["forecast"])
+        return str(self.options.get("forecast") or getattr(self.policy_class(), "defaults", {}).get("forecast"))
 
-    def make_policy(self, city) -> RolloutPolicy:
+    def make_policy(self, city: City) -> Policy:
         """The in-process policy: the reference, and the forecast source when there is no predictor service."""
         self.policy_class()
         return make_policy(self.policy, city, **self.options)  # type: ignore[return-value]
@@ -146,6 +151,8 @@ class FleetConfig:
     def rollout_config(self) -> RolloutConfig:
         """The planner settings alone, without loading a forecast (the predictor service has it)."""
         cls = self.policy_class()
+        if not issubclass(cls, RolloutPolicy):
+            return RolloutConfig()  # a central policy: the agents plan nothing with it
         planner = {k: v for k, v in self.options.items() if k not in ("forecast", "model")}
         try:
             return cls.rollout_config(**planner)
@@ -172,13 +179,15 @@ class Coordinator:
         scen, requests, start, context = config.instance()
         self.city = scen.city
         self.start = dt.datetime.combine(context.date, dt.time(config.hour))
-        self.policy: RolloutPolicy | None = None
+        self.policy: Policy | None = None
+        #: A centrally computed policy (:attr:`agents.base.Policy.central`): its joint control is the state's base controls.
+        self.central = config.policy_class().central
         if config.predictor:
             self.rollout = config.rollout_config()
         else:
             self.policy = config.make_policy(self.city)
             self.policy.reset(context)
-            self.rollout = self.policy.config
+            self.rollout = config.rollout_config() if self.central else self.policy.config
         self.sim = FleetSim(self.city, requests, start)
         self.spec = RunSpec(run=config.run, scenario=config.scenario, data_dir=config.data_dir, city=self.city.summary(), taxis=config.taxis,
                             minutes=config.minutes, policy=config.policy, rollout=asdict(self.rollout),
@@ -287,9 +296,22 @@ class Coordinator:
         hour, forecast = self.hour_forecast
         return sector_message(forecast, self.city, hour, sector).encode()
 
+    def base(self, obs: Observation) -> np.ndarray:
+        """The minute's base controls: the central policy's joint control, or the rollout's base policy's."""
+        if self.central:
+            return np.asarray(self.policy.act(obs), dtype=np.int32)  # type: ignore[union-attr]
+        return base_controls(self.city, self.rollout, obs)
+
+    def waves(self, obs: Observation) -> Waves:
+        """The minute's turns: by the rollout's dependencies, or all at once for a central policy (each answers its own entry)."""
+        if not self.central:
+            return plan_waves(self.city, obs, self.rollout.prune)
+        free = np.flatnonzero(obs.tau == 0)
+        return Waves(agents=free, wave=np.zeros(free.size, dtype=np.int64), depends=[np.empty(0, dtype=np.int64) for _ in free])
+
     def full_state(self) -> bytes:
         obs = self.sim.observe()
-        return state_message(obs, None, base_controls(self.city, self.rollout, obs), self.epoch).encode()
+        return state_message(obs, None, self.base(obs), self.epoch).encode()
 
     def _snapshot(self) -> Snapshot:
         """The full state (with its base controls) and the hour's forecast: all a (re)joining agent needs (a turn brings its commitments)."""
@@ -369,7 +391,7 @@ class Coordinator:
             return Counted(pub, self.tally.traffic)
 
         pub_state = counted(publisher(session, keys.state))
-        pub_forecast = ForecastPublisher(session, keys, self.city, wrap=counted) if self.policy is not None else None
+        pub_forecast = ForecastPublisher(session, keys, self.city, wrap=counted) if self.policy is not None and not self.central else None
         turn_pub = {a: counted(publisher(session, keys.turn(a))) for a in range(cfg.taxis)}
         commit_pub = {a: counted(publisher(session, keys.committed(a))) for a in range(cfg.taxis)}
         self._wait_for_agents(inbox)
@@ -385,14 +407,14 @@ class Coordinator:
             if self.health.partitioned():
                 self._partition(inbox, t)  # the clock does not run while most of the fleet is cut off
             obs = self.obs = self.sim.observe()
-            if t % 60 == 0 or t == first:
+            if (t % 60 == 0 or t == first) and not self.central:
                 self.forecast_msg = self._forecast(session, inbox, t // 60)
                 self._hold_forecast(pub_forecast, t // 60)
-            base = base_controls(self.city, self.rollout, obs)
+            base = self.base(obs)
             pub_state.put(state_message(obs, previous, base, self.epoch).encode())
             previous = np.asarray(obs.req_index)
             u = base.copy()
-            waves = plan_waves(self.city, obs, self.rollout.prune)
+            waves = self.waves(obs)
             tally.waves.append(self._turns(inbox, turn_pub, commit_pub, t, waves, base, u))
             controls[t] = u
             costs.append(self.sim.step(u))

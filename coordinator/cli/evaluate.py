@@ -25,12 +25,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=positive, default=25, help="initial states 0..N-1")
     p.add_argument("--taxis", type=positive, default=100)
     p.add_argument("--minutes", type=positive, default=60, help="episode length N in minutes")
-    p.add_argument("--policies", nargs="+", default=["greedy", "ia", "oracle"],
+    p.add_argument("--policies", nargs="+", default=["greedy", "ia", "match", "rebalance", "oracle"],
                    help="registry names, each optionally with options: surge:forecast=true-rate,samples=500 "
                         "(oracle and oracle-auction always run)")
     p.add_argument("--forecast", type=forecast_name, default=None,
-                   help="forecast provider for surge (true-rate, previous-hour, model); garces2023 keeps previous-hour")
-    p.add_argument("--model", type=model_dir, default=None, help="trained predictor directory for surge's --forecast model")
+                   help="forecast provider (true-rate, previous-hour, model) of every policy that reads one (surge, rebalance); "
+                        "garces2023 keeps previous-hour")
+    p.add_argument("--model", type=model_dir, default=None, help="trained predictor directory for --forecast model")
     p.add_argument("--horizon", type=positive, default=None, help="rollout horizon H")
     p.add_argument("--samples", type=positive, default=None, help="rollout Monte-Carlo samples")
     p.add_argument("--world-seed", type=int, default=0, help="seed of the synthetic demand world")
@@ -102,6 +103,12 @@ def print_results(doc: dict, *, policy: str | None = None, plot_path: str | None
     if comparison:
         print()
         print(format_comparison(comparison))
+        from coordinator.experiments.practice import against_practice, verdict_lines
+
+        practice = against_practice(doc, policy)
+        if practice:
+            print()
+            print("\n".join(verdict_lines(practice)))
     n, below = oracle_exceptions(doc)
     print(f"\n{doc['reference_oracle']} had the lowest total cost in {n - len({(e['date'], e['hour'], e['seed']) for e in below})} of {n} instances")
     for e in below:

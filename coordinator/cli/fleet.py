@@ -44,8 +44,10 @@ def fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:
     p.add_argument("--taxis", type=positive, default=taxis, help="taxis, one agent process each")
     p.add_argument("--seed", type=int, default=0, help="initial placement seed (as surge evaluate's seeds)")
     p.add_argument("--world-seed", type=int, default=0)
-    p.add_argument("--policy", default="surge", help="rollout policy: surge or garces2023, with options as in evaluate")
-    p.add_argument("--forecast", type=forecast_name, default=None, help="forecast provider for surge (true-rate, previous-hour, model)")
+    p.add_argument("--policy", default="surge",
+                   help="rollout policy (surge, garces2023) or centrally computed one (match, rebalance), with options as in evaluate")
+    p.add_argument("--forecast", type=forecast_name, default=None,
+                   help="forecast provider of the policy (true-rate, previous-hour, model): surge's, or rebalance's")
     p.add_argument("--model", type=model_dir, default=None, help="trained predictor directory for --forecast model")
     p.add_argument("--horizon", type=positive, default=None)
     p.add_argument("--samples", type=positive, default=samples)

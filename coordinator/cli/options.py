@@ -120,23 +120,26 @@ def positive(text: str) -> int:
 
 
 def rollout_options(args: argparse.Namespace, names: list[str]) -> dict[str, dict]:
-    """Per-policy options from the rollout flags, for the policies that take them.
+    """Per-policy options from the rollout and forecast flags, for the policies that take them.
 
-    ``--horizon`` and ``--samples`` go to both rollout policies; ``--forecast``
-    and ``--model`` only to ``surge``, so that ``garces2023`` keeps its
-    previous-hour demand (the baseline as the paper ran it).
+    ``--horizon`` and ``--samples`` go to both rollout policies.  ``--forecast``
+    and ``--model`` go to every policy that declares a ``forecast`` option
+    (``surge``, ``rebalance``), so that they plan with the same information,
+    except ``garces2023``, which keeps its previous-hour demand (the baseline
+    as the paper ran it; ``garces2023:forecast=…`` sets it).
     """
-    from agents.base import split_policy
+    from agents.base import policy_class, split_policy
 
     shared = {k: v for k, v in (("horizon", args.horizon), ("samples", args.samples)) if v is not None}
-    own = {k: v for k, v in (("forecast", args.forecast), ("model", args.model)) if v is not None}
+    own = {k: v for k, v in (("forecast", args.forecast), ("model", getattr(args, "model", None))) if v is not None}
     out = {}
     for label in names:
         name = split_policy(label)[0]
-        if name == "surge" and (shared or own):
-            out[label] = {**shared, **own}
-        elif name == "garces2023" and shared:
-            out[label] = dict(shared)
+        opts = dict(shared) if name in ("surge", "garces2023") else {}
+        if name != "garces2023" and own and any(o.name == "forecast" for o in policy_class(name).options):
+            opts.update(own)
+        if opts:
+            out[label] = opts
     return out
 
 

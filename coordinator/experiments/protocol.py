@@ -60,7 +60,8 @@ SMOKE = Protocol(hours=(19,), seeds=1, other_dates=0, ablation_hours=(19,), abla
                  samples=4, oracle_iters=20, epochs=1, predictor=False, gif_minutes=4)
 
 
-MAIN_POLICIES = ("greedy", "ia", "garces2023", "surge")
+#: ``match`` and ``rebalance`` are the practical baselines; ``rebalance`` plans with ``surge``'s forecast (:func:`policy_options`).
+MAIN_POLICIES = ("greedy", "ia", "garces2023", "match", "rebalance", "surge")
 
 
 #: ``garces2023`` with the model, its standard certainty equivalence changed in both parts and in one: random counts
@@ -125,6 +126,9 @@ class Run:
 def policy_options(run: Run, labels: list[str]) -> dict[str, dict]:
     """Per-label options: the trained model for every forecast=model (surge's default), the run's sample count, exact planning.
 
+    ``rebalance`` plans with ``surge``'s forecast where its label names none,
+    so that ``surge`` meets the practical baseline with the same information.
+
     Every ``surge`` label plans exactly (:data:`agents.rollout_policy.EXACT`),
     as the paper's method does and as ``garces2023`` does, so that the
     comparisons are like with like; ``surge``'s default approximations are
@@ -137,13 +141,13 @@ def policy_options(run: Run, labels: list[str]) -> dict[str, dict]:
     for label in labels:
         name, opts = parse_policy(label)
         o: dict = pinned_options(label)
-        if name in ("surge", "garces2023"):
-            if run.protocol.samples is not None:
+        if name in ("surge", "garces2023", "rebalance"):
+            if run.protocol.samples is not None and name != "rebalance":
                 o["samples"] = run.protocol.samples
-            forecast = opts.get("forecast", run.forecast if name == "surge" else None)
+            forecast = opts.get("forecast", run.forecast if name in ("surge", "rebalance") else None)
             if forecast == "model":
                 o["model"] = str(run.model)
-            elif name == "surge" and "forecast" not in opts:
+            elif name in ("surge", "rebalance") and "forecast" not in opts:
                 o["forecast"] = forecast
         if name == "oracle" and run.protocol.oracle_iters is not None:
             o["iters"] = run.protocol.oracle_iters

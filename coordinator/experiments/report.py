@@ -22,6 +22,7 @@ from coordinator.experiments.analysis import (
     paired,
     summarize,
 )
+from coordinator.experiments.practice import report_section
 from coordinator.experiments.results import instance_key
 
 HOURS = (15, 17, 19, 21)
@@ -47,6 +48,7 @@ PAPER_PLAN_SECONDS = {"garces2023": (153.42, 7.65), "surge": (56.47, 5.40)}
 PAPER_BASE = {"ia": {15: (103.73, 3.32), 17: (189.25, 3.23), 19: (279.37, 2.47), 21: (202.84, 2.36)},
               "greedy": {15: (102.57, 3.34), 17: (189.03, 2.12), 19: (280.88, 2.79), 21: (201.79, 2.06)}}
 NAMES = {"greedy": "Greedy", "ia": "Inst. Assign.", "garces2023": "Garces et al.", "surge": "Our approach (surge)",
+         "match": "Optimal matching", "rebalance": "Matching + rebalancing",
          "oracle": "Oracle (route planner)", "oracle-auction": "Oracle (paper's auction)"}
 FEASIBLE = ("greedy", "ia", "garces2023")
 
@@ -85,7 +87,7 @@ def cost_tables(doc: dict, metric: str, paper: dict, digits: int) -> list[str]:
     """Ours beside the paper's, with ratios to greedy and to the oracle (ours: route planner; paper: its auction)."""
     full = {**doc, "episodes": doc["episodes"] + (_oracle_rows(doc) if metric == "total_cost" else [])}
     by = _by(summarize(full))
-    policies = ["greedy", "ia", "garces2023", "surge"] + (["oracle", "oracle-auction"] if metric == "total_cost" else [])
+    policies = ["greedy", "ia", "garces2023", "match", "rebalance", "surge"] + (["oracle", "oracle-auction"] if metric == "total_cost" else [])
     hours = sorted({e["hour"] for e in doc["episodes"]})
     head = ["hour", "policy", "ours", "paper", "ours / greedy", "paper / greedy"] + (["ours / oracle", "ours / oracle-auction", "paper / oracle"] if metric == "total_cost" else [])
     rows = []
@@ -300,7 +302,8 @@ def write_report(run, scen, docs: dict, pe: dict | None, figs: dict[str, str], s
               f"Computed from the main run (the paper's date; {info}, `garces2023` with previous-hour demand).", ""]
     for claim, held, why in verdicts(main, docs):
         lines.append(f"- **{'held' if held else 'not held'}**: {claim}. {why}.")
-    lines += ["", "## Table 1: total cost (paper Table 1)", "",
+    lines += [""] + report_section(main)
+    lines += ["## Table 1: total cost (paper Table 1)", "",
               "Ours: mean ± std over the seeds of the paper's date. Oracle: `oracle` is our route planner with chaining; "
               "`oracle-auction` is the paper's auction, the one its Table 1 reports. Neither is a proven optimum.", ""]
     lines += cost_tables(main, "total_cost", PAPER_TOTAL_COST, 1)
@@ -310,9 +313,12 @@ def write_report(run, scen, docs: dict, pe: dict | None, figs: dict[str, str], s
               "(policy's total cost − oracle's) / requests the policy served, in minutes, against the route-planning oracle.", "",
               f"![wait overhead]({figs['overhead']})", "", f"![total cost]({figs['cost']})", ""]
     by = _by(summarize(main))
-    lines += _table(["hour"] + [NAMES[p] for p in ("greedy", "ia", "garces2023", "surge")] + ["gap closed by surge (oracle)", "(oracle-auction)"],
-                    [[f"{h}h"] + [_ms(by[(h, p)]["wait_overhead_per_served"], 2) if (h, p) in by else "—" for p in ("greedy", "ia", "garces2023", "surge")]
+    shown, closers = ("greedy", "ia", "garces2023", "match", "rebalance", "surge"), ("surge", "rebalance", "garces2023")
+    lines += _table(["hour"] + [NAMES[p] for p in shown] + ["gap closed by surge (oracle)", "(oracle-auction)"]
+                    + [f"gap closed by {p} (oracle)" for p in closers[1:]],
+                    [[f"{h}h"] + [_ms(by[(h, p)]["wait_overhead_per_served"], 2) if (h, p) in by else "—" for p in shown]
                      + [_pct(by.get((h, "surge"), {}).get("gap_closed")), _pct(by.get((h, "surge"), {}).get("gap_closed_auction"))]
+                     + [_pct(by.get((h, p), {}).get("gap_closed")) for p in closers[1:]]
                      for h in sorted({e["hour"] for e in main["episodes"]})])
     lines += ["", "## Table 3: planning seconds per step (paper Table 3)", ""]
     rows = []
@@ -336,11 +342,13 @@ def write_report(run, scen, docs: dict, pe: dict | None, figs: dict[str, str], s
     lines += ["", "## Paired comparisons (instance by instance; 95 % CI by paired bootstrap, 10,000 resamples)", "",
               f"### Headline: `surge` ({'trained model' if run.forecast == 'model' else 'true rates: no predictor in this protocol'}) "
               "against `garces2023` (previous hour), the paper's comparison", ""]
-    lines += paired_rows(main, [("surge", "garces2023"), ("surge", "ia"), ("surge", "greedy"), ("garces2023", "ia")])
+    lines += paired_rows(main, [("surge", "garces2023"), ("surge", "ia"), ("surge", "greedy"), ("garces2023", "ia"),
+                                ("surge", "rebalance"), ("surge", "match"), ("rebalance", "match")])
     if "dates" in docs:
         d = complete_seeds(docs["dates"])
         lines += ["", f"### Further dates: {', '.join(d['config']['dates'])} (weekdays of the test months with evening events)", ""]
-        lines += paired_rows(d, [("surge", "garces2023"), ("surge", "ia"), ("garces2023", "ia")])
+        lines += paired_rows(d, [("surge", "garces2023"), ("surge", "ia"), ("garces2023", "ia"), ("surge", "rebalance"), ("surge", "match")])
+        lines += [""] + report_section(d, heading="#### Against the state of practice on these dates")
     abl = complete_seeds(docs["ablation"])
     lines += ["", "## Ablations (paper Table 4 and more)", "",
               "### Same information for both rollout policies (true-rate is an upper bound, never the headline)", ""]

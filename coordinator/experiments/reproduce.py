@@ -6,8 +6,9 @@ Steps, each showing progress on stderr:
 2. the predictor's percent-error comparison (``surge predictor eval``);
 3. the main comparison on the paper's date 2022-11-17: hours 15, 17, 19 and
    21, 25 initial states, 100 taxis, 60 minutes: greedy, ia, garces2023
-   (previous-hour demand), surge (the trained model), oracle and
-   oracle-auction;
+   (previous-hour demand), the practical baselines match and rebalance
+   (rebalance with surge's forecast), surge (the trained model), oracle
+   and oracle-auction;
 4. the same policies at 17 and 19 h on further weekdays of the test months
    with evening events, 10 initial states each;
 5. the ablations on 10 seeds at 17 and 19 h: both rollout policies with the

@@ -40,12 +40,16 @@ def test_reproduce_smoke_writes_the_report_and_resumes(tmp_path: Path, capsys, m
                     "Planning seconds summed over the episodes of the results"):
         assert section in report
     assert report.count("**held**") + report.count("**not held**") == 3
+    assert "## Against the state of practice" in report and "| 19h | `surge` − `rebalance` |" in report
+    assert report.count("19 h: surge beats the strongest practical baseline: ") == 1  # one computed verdict per hour
     assert "no predictor in this protocol" in report  # the smoke protocol says what surge planned with
     assert "timed on one machine" in report  # the planning verdict compares rows of one machine
     for name in ("fig-total-cost.png", "fig-wait-overhead.png", "fig-surge-map.png", "surge-vs-greedy.gif"):
         assert (out / name).stat().st_size > 1000, name
     main_doc = json.loads((out / "results-main.json").read_text())
     assert main_doc["schema"] == RESULTS_SCHEMA and main_doc["reference_oracle"] == "oracle"
+    assert {"match", "rebalance"} <= set(main_doc["config"]["policies"])
+    assert main_doc["config"]["policy_options"]["rebalance"] == {"forecast": "true-rate"}  # surge's forecast in this protocol
     assert main(["reproduce", "--smoke", "--out", str(out), "--report-only"]) == 0
     assert "## Status: interim" not in (out / "REPORT.md").read_text()  # every step is done: the report is final
     capsys.readouterr()
@@ -187,3 +191,23 @@ def test_the_ia_explanation_names_only_differences_clear_at_every_hour() -> None
     few = [e for e in rows if e["seed"] < 4]  # 4 instances an hour: too few to call any effect clear
     text = "\n".join(ia_explanation({"episodes": few}, *CE_LABELS))
     assert "none of the four differences is clear at every hour" in text and "fewer than 5: not judged" in text
+
+
+def test_surge_meets_the_strongest_practical_baseline_of_each_hour_with_the_same_forecast() -> None:
+    """The strongest is chosen per hour among the baselines with surge's forecast (or none); the verdict needs a CI below zero."""
+    from coordinator.experiments.practice import against_practice, report_section, verdict_lines
+
+    costs = {17: {"surge": 100, "match": 130, "rebalance": 110, "rebalance:forecast=true-rate": 50},
+             19: {"surge": 100, "match": 95, "rebalance": 120, "rebalance:forecast=true-rate": 50}}
+    rows = [{"date": "2022-11-17", "hour": h, "seed": s, "policy": p, "total_cost": c + (s % 3) * (p == "surge"), "outstanding_end": 0,
+             "served": 10, "wait_overhead_per_served": 1.0, "oracle_cost": 0} for h, by in costs.items() for p, c in by.items() for s in range(6)]
+    doc = {"config": {"policies": list(costs[17]), "policy_options": {"surge": {"forecast": "previous-hour"}}}, "episodes": rows}
+    got = {r["hour"]: r for r in against_practice(doc, "surge")}
+    assert got[17]["strongest"] == "rebalance" and got[17]["beats"] and got[17]["wins"] == 6  # true-rate's row is other information
+    assert got[19]["strongest"] == "match" and not got[19]["beats"] and got[19]["wins"] == 0
+    lines = verdict_lines(list(got.values()))
+    assert lines[0].startswith("17 h: surge beats the strongest practical baseline: yes (strongest rebalance, forecast previous-hour")
+    assert lines[1].startswith("19 h: surge beats the strongest practical baseline: no (strongest match")
+    few = {**doc, "episodes": [e for e in rows if e["seed"] < 3]}
+    assert not any(r["beats"] for r in against_practice(few, "surge"))  # 3 instances: not judged
+    assert "| 17h | `rebalance` | 110.0 |" in "\n".join(report_section(doc))
