@@ -443,8 +443,9 @@ class TaxiAgent:
         if turn is not None and obs is not None and turn.t < obs.t:
             self.pending = None  # the run has moved on without this agent's answer
             return
-        ready = self.central or (self.context is not None and self.context.obs.t == turn.t)
-        if turn is None or obs is None or obs.t != turn.t or not ready:
+        if turn is None or obs is None or obs.t != turn.t:
+            return
+        if not self.central and (self.context is None or self.context.obs.t != turn.t):
             return
         self.pending = None  # a turn is planned, answered again, or dropped, once
         committed = np.empty(0, dtype=np.int32) if self.central else self._predecessors(turn)
