@@ -1,5 +1,5 @@
-"""The base policies simulated inside a rollout (numba, ``cache=True``): greedy, its
-one-taxi shadow replay, and instantaneous assignment.
+"""The greedy base policy simulated inside a rollout (numba, ``cache=True``), its one-taxi
+shadow replay, and the per-taxi helpers the ``ia`` simulation (:mod:`agents._iasim`) shares.
 
 Conventions are those of :mod:`agents._kernels`.
 """
@@ -98,7 +98,7 @@ def nearest_request(
 
 
 @njit(cache=True)
-def _oldest_at(
+def oldest_at(
     v: int,
     alive: np.ndarray,
     act: np.ndarray,
@@ -138,7 +138,7 @@ def _walk(v: int, target: int, hops: int, hop_t: np.ndarray) -> int:
 
 
 @njit(cache=True)
-def _time_to_pickup(
+def time_to_pickup(
     v: int,
     busy: int,
     tail: int,
@@ -204,7 +204,7 @@ def simulate_greedy(
 
     ``end`` values the taxis' state after the horizon: with ``tail > 0``,
     ``Σ_i (tail - a_i)²``, ``a_i`` taxi i's time to its next pickup
-    (:func:`_time_to_pickup`); else with ``place`` (one value per node),
+    (:func:`time_to_pickup`); else with ``place`` (one value per node),
     ``Σ_i place[v_i]`` over the taxis free after the horizon, ``v_i`` taxi i's
     node (a busy taxi's drop-off is the request's, not a choice); else 0.
 
@@ -322,7 +322,7 @@ def simulate_greedy(
                 t_first = k
             c = tgt[i]
             v = e_pick[c] if c < r0 else a_pick[c - r0]
-            r = _oldest_at(v, alive, act, n_act, near, near_d, e_pick, a_pick)
+            r = oldest_at(v, alive, act, n_act, near, near_d, e_pick, a_pick)
             if r < 0:
                 continue
             alive[r] = False
@@ -354,7 +354,7 @@ def simulate_greedy(
             if tfree[i] <= horizon + 1 and c >= 0:
                 v = _walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(horizon + 1 - kanc[i], d0[i]), hop_t)
             if tail > 0:
-                a = _time_to_pickup(v, tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                a = time_to_pickup(v, tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
                 spared += (tail - a) * (tail - a)
             elif tfree[i] <= horizon + 1:
                 spared += place[v]
@@ -465,171 +465,3 @@ def shadow_greedy(
     return -1
 
 
-@njit(cache=True, inline="always")
-def _heap_push(heap: np.ndarray, n: int, key: int) -> int:
-    """Push ``key`` onto the min-heap ``heap[:n]``; return the new size."""
-    j = n
-    heap[j] = key
-    while j > 0:
-        parent = (j - 1) >> 1
-        if heap[parent] <= heap[j]:
-            break
-        heap[parent], heap[j] = heap[j], heap[parent]
-        j = parent
-    return n + 1
-
-
-@njit(cache=True, inline="always")
-def _heap_pop(heap: np.ndarray, n: int) -> tuple[int, int]:
-    """Pop the smallest key of the min-heap ``heap[:n]``; return it and the new size."""
-    top = heap[0]
-    n -= 1
-    heap[0] = heap[n]
-    j = 0
-    while True:
-        a = 2 * j + 1
-        if a >= n:
-            break
-        if a + 1 < n and heap[a + 1] < heap[a]:
-            a += 1
-        if heap[j] <= heap[a]:
-            break
-        heap[j], heap[a] = heap[a], heap[j]
-        j = a
-    return top, n
-
-
-@njit(cache=True)
-def simulate_ia(
-    horizon: int,
-    alive: np.ndarray,
-    n_alive: int,
-    tpos: np.ndarray,
-    tfree: np.ndarray,
-    n_arr: int,
-    a_pick: np.ndarray,
-    a_drop: np.ndarray,
-    a_step: np.ndarray,
-    e_pick: np.ndarray,
-    e_drop: np.ndarray,
-    near: np.ndarray,
-    near_d: np.ndarray,
-    dist: np.ndarray,
-    dist_t: np.ndarray,
-    hop_t: np.ndarray,
-    act: np.ndarray,
-    lb: np.ndarray,
-    seen: np.ndarray,
-    free: np.ndarray,
-    best_d: np.ndarray,
-    best_c: np.ndarray,
-    target: np.ndarray,
-    matched: np.ndarray,
-    heap: np.ndarray,
-    tail: int = 0,
-    place: np.ndarray = np.empty(0, dtype=np.int64),
-) -> tuple[int, int]:
-    """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``(Σ g_k + g_H, end)``.
-
-    ``end`` is as in :func:`simulate_greedy`.
-
-    Every step, :func:`agents.ia.ia_controls`: broadcast of local eligibility
-    commits the globally closest (distance, taxi, request) pair, retires both,
-    and repeats; each taxi's nearest free request is refreshed lazily.  ``lb[i]``
-    bounds taxi ``i``'s distance to the alive arrivals among the first
-    ``seen[i]`` from below (see :func:`nearest_request`): it drops by one when the
-    taxi moves a hop and is unknown (-1) after a pickup.
-    """
-    r0 = e_pick.shape[0]
-    mt = tpos.shape[0]
-    n_act = 0
-    ai = 0
-    cost = 0
-    for i in range(mt):
-        lb[i] = -1
-    for k in range(1, horizon + 1):
-        while ai < n_arr and a_step[ai] == k:
-            act[n_act] = r0 + ai
-            n_act += 1
-            n_alive += 1
-            ai += 1
-        nf = 0
-        for i in range(mt):
-            if tfree[i] <= k:
-                free[nf] = i
-                target[nf] = -1
-                nf += 1
-        if nf > 0 and n_alive > 0:
-            for f in range(nf):
-                i = free[f]
-                best_d[f], best_c[f], lb[i] = nearest_request(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
-                seen[i] = ai
-            # A binary heap of (distance, taxi) keys; a key whose request was taken
-            # meanwhile is refreshed when it surfaces (keys only ever grow).
-            n_h = 0
-            for f in range(nf):
-                if best_c[f] >= 0:
-                    n_h = _heap_push(heap, n_h, best_d[f] * mt + f)
-            n_m = 0
-            while n_h > 0:
-                key, n_h = _heap_pop(heap, n_h)
-                f = key % mt
-                c = best_c[f]
-                if not alive[c]:
-                    i = free[f]
-                    best_d[f], best_c[f], lb[i] = nearest_request(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
-                    if best_c[f] >= 0:
-                        n_h = _heap_push(heap, n_h, best_d[f] * mt + f)
-                    continue
-                target[f] = c
-                alive[c] = False
-                matched[n_m] = c
-                n_m += 1
-            for j in range(n_m):
-                c = matched[j]
-                alive[c] = True
-                if c >= r0:
-                    # The arrival was hidden while bounds were refreshed: bring them back below it.
-                    p = a_pick[c - r0]
-                    for f in range(nf):
-                        i = free[f]
-                        if lb[i] >= 0:
-                            lb[i] = min(lb[i], np.int64(dist[tpos[i], p]))
-            for f in range(nf):
-                c = target[f]
-                if c < 0:
-                    continue
-                i = free[f]
-                v = tpos[i]
-                p = e_pick[c] if c < r0 else a_pick[c - r0]
-                if p != v:
-                    tpos[i] = hop_t[p, v]
-                    if lb[i] > 0:
-                        lb[i] -= 1
-                    continue
-                r = _oldest_at(v, alive, act, n_act, near, near_d, e_pick, a_pick)
-                if r < 0:
-                    continue
-                alive[r] = False
-                n_alive -= 1
-                drop = e_drop[r] if r < r0 else a_drop[r - r0]
-                tpos[i] = drop
-                tfree[i] = k + 1 + max(1, np.int64(dist[v, drop]))
-                lb[i] = -1
-                if r >= r0:
-                    for j in range(n_act):
-                        if act[j] == r:
-                            act[j] = act[n_act - 1]
-                            n_act -= 1
-                            break
-        cost += n_alive
-    spared = 0
-    if tail > 0:
-        for i in range(mt):
-            a = _time_to_pickup(tpos[i], tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
-            spared += (tail - a) * (tail - a)
-    elif place.shape[0] > 0:
-        for i in range(mt):
-            if tfree[i] <= horizon + 1:
-                spared += place[tpos[i]]
-    return cost + n_alive, spared

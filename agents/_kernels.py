@@ -51,8 +51,8 @@ from agents._basesim import (
     nearest_request,
     shadow_greedy,
     simulate_greedy,
-    simulate_ia,
 )
+from agents._iasim import simulate_ia
 from agents._sampling import (
     BIG_HOPS,
     GREEDY,

@@ -1,6 +1,6 @@
 """The coordinator's checkpoint: after each minute, everything a resumed coordinator needs to play the next one.
 
-A run is a pure function of its :class:`~coordinator.runtime.FleetConfig`
+A run is a pure function of its :class:`~coordinator.run_config.FleetConfig`
 and the controls committed so far, so the checkpoint holds the config, the
 ground-truth fleet state after the last finished minute (positions, busy
 times, destinations, which request each taxi picked up when) and the tally

@@ -30,7 +30,7 @@ from bus.certs import fleet_size, make_certs, taxi_name
 from bus.router import free_tcp_port, router_main, wait_for_tcp
 from bus.session import SessionArgs
 from city.errors import ConfigError, SurgeError
-from coordinator.runtime import FleetConfig
+from coordinator.run_config import FleetConfig
 
 
 def agent_context():

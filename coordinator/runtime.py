@@ -40,124 +40,30 @@ import os
 import sys
 import time
 from contextlib import ExitStack
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agents.base import EpisodeContext, Policy, make_policy, policy_class
-from agents.rollout import RolloutConfig, base_controls, candidate_controls
-from agents.rollout_policy import RolloutPolicy
+from agents.base import Policy
+from agents.rollout import base_controls, candidate_controls
 from agents.waves import Waves, plan_waves
-from bus.checks import (
-    Bounds,
-    Rejections,
-    check_ack,
-    check_choice,
-    check_control,
-    check_forecast,
-)
+from bus.checks import Bounds, Rejections, check_ack, check_choice, check_control, check_forecast
 from bus.delta import state_message
 from bus.forecast_messages import ForecastPublisher, sector_message
 from bus.keys import Keys
 from bus.session import Inbox, SessionArgs, open_session, publisher
-from bus.wire import (
-    ENCODING,
-    Ack,
-    Control,
-    ForecastMsg,
-    ForecastRequest,
-    RunSpec,
-    Snapshot,
-    Stop,
-    Turn,
-    WireError,
-    decode,
-)
+from bus.wire import ENCODING, Ack, Control, ForecastMsg, ForecastRequest, RunSpec, Snapshot, Stop, Turn, WireError, decode
 from city.errors import ConfigError
 from city.fingerprint import city_sha256, code_version
-from city.graph import City
 from city.forecast import Forecast
-from city.sim import FleetSim, Observation, Requests, decisions_hash
+from city.sim import FleetSim, Observation, decisions_hash
 from coordinator import checkpoint
+from coordinator.run_config import FleetConfig
 from coordinator.claim import TAKEOVER_WAIT_S, TakenOver, claim, epoch_time, taken_over
-from coordinator.faults import (
-    ACK_WAIT_S,
-    RESEND_S,
-    SETTLE_S,
-    Health,
-    PartitionError,
-    agents_text,
-)
+from coordinator.faults import ACK_WAIT_S, RESEND_S, SETTLE_S, Health, PartitionError, agents_text
 from coordinator.metrics import Counted
-
-
-@dataclass(frozen=True)
-class FleetConfig:
-    """One distributed episode: the same instance as ``surge evaluate``'s (date, hour, seed)."""
-
-    run: str = "demo"
-    scenario: str = "synthetic"
-    data_dir: str | None = None
-    date: str = "2022-11-17"
-    hour: int = 19
-    minutes: int = 60
-    taxis: int = 8
-    seed: int = 0
-    world_seed: int = 0
-    policy: str = "surge"
-    options: dict = field(default_factory=dict)
-    deadline_s: float = 30.0
-    join_timeout_s: float = 120.0
-    #: Least wall time per simulated minute: 0 runs as fast as the agents plan, 60 in real time.
-    minute_s: float = 0.0
-    #: Ask a ``surge predictor serve`` process on the bus for each hour's forecast instead of computing it here.
-    predictor: bool = False
-    #: Seconds the clock waits for the agents of a partition to come back before the run ends.
-    partition_timeout_s: float = 120.0
-    #: Seconds the launcher's agents wait for a vanished coordinator (to be resumed) before they leave.
-    grace_s: float = 30.0
-
-    def instance(self) -> tuple[Any, Requests, np.ndarray, EpisodeContext]:
-        """The scenario, requests, start positions and episode context of this run: one place for both runs that must agree."""
-        from city.episode import episode_requests, initial_positions
-        from city.scenario import load_scenario
-
-        date = dt.date.fromisoformat(self.date)
-        scen = load_scenario(self.scenario, self.data_dir, year=date.year, seed=self.world_seed)
-        context = EpisodeContext(city=scen.city, date=date, hour=self.hour, minutes=self.minutes, seed=self.seed, world=scen.world)
-        return scen, episode_requests(scen.world, date, self.hour, self.minutes), initial_positions(scen.city, self.taxis, self.seed), context
-
-    def policy_class(self) -> type[Policy]:
-        cls = policy_class(self.policy)
-        if not (issubclass(cls, RolloutPolicy) or cls.central):
-            raise ConfigError(f"policy {self.policy!r}: the distributed runtime runs rollout policies (surge, garces2023) "
-                              "and centrally computed ones (match, rebalance)")
-        if cls.central and self.predictor:
-            raise ConfigError(f"policy {self.policy!r} is computed by the coordinator, which reads its own forecast: "
-                              "a predictor service serves rollout agents only")
-        return cls
-
-    def forecast_name(self) -> str:
-        """The forecast provider the run uses: the ``forecast`` option, or the policy's default."""
-        return str(self.options.get("forecast") or getattr(self.policy_class(), "defaults", {}).get("forecast"))
-
-    def make_policy(self, city: City) -> Policy:
-        """The in-process policy: the reference, and the forecast source when there is no predictor service."""
-        self.policy_class()
-        return make_policy(self.policy, city, **self.options)  # type: ignore[return-value]
-
-    def rollout_config(self) -> RolloutConfig:
-        """The planner settings alone, without loading a forecast (the predictor service has it)."""
-        cls = self.policy_class()
-        if not issubclass(cls, RolloutPolicy):
-            return RolloutConfig()  # a central policy: the agents plan nothing with it
-        planner = {k: v for k, v in self.options.items() if k not in ("forecast", "model")}
-        try:
-            return cls.rollout_config(**planner)
-        except TypeError as exc:
-            raise ConfigError(f"policy {self.policy!r}: {exc}") from None
 
 
 def log(message: str) -> None:
@@ -209,6 +115,8 @@ class Coordinator:
         self.rejected = Rejections(log)
         #: The minute being played, against which proposed controls are checked.
         self.obs: Observation | None = None
+        #: ``(minute, base controls)`` of the last minute whose base was computed (:meth:`base`).
+        self.minute_base: tuple[int, np.ndarray] | None = None
         #: The agents of the wave being released whose controls are still awaited, and those that came.
         self.waiting: set[int] = set()
         self.arrived: dict[int, Control] = {}
@@ -297,10 +205,18 @@ class Coordinator:
         return sector_message(forecast, self.city, hour, sector).encode()
 
     def base(self, obs: Observation) -> np.ndarray:
-        """The minute's base controls: the central policy's joint control, or the rollout's base policy's."""
+        """The minute's base controls: the central policy's joint control, or the rollout's base policy's.
+
+        Computed once a minute: a snapshot asked for during the minute gets the same array.
+        """
+        if self.minute_base is not None and self.minute_base[0] == obs.t:
+            return self.minute_base[1]
         if self.central:
-            return np.asarray(self.policy.act(obs), dtype=np.int32)  # type: ignore[union-attr]
-        return base_controls(self.city, self.rollout, obs)
+            base = np.asarray(self.policy.act(obs), dtype=np.int32)  # type: ignore[union-attr]
+        else:
+            base = base_controls(self.city, self.rollout, obs)
+        self.minute_base = (int(obs.t), base)
+        return base
 
     def waves(self, obs: Observation) -> Waves:
         """The minute's turns: by the rollout's dependencies, or all at once for a central policy (each answers its own entry)."""

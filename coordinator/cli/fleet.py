@@ -32,7 +32,7 @@ from coordinator.fleet import (
     resumed_config,
     run_local_fleet,
 )
-from coordinator.runtime import FleetConfig
+from coordinator.run_config import FleetConfig
 
 
 def fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:

@@ -44,7 +44,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
     except ImportError:
         raise ConfigError("surge watch needs its web server: pip install 'surge[watch]' (starlette, uvicorn, websockets)") from None
 
-    from coordinator.runtime import FleetConfig
+    from coordinator.run_config import FleetConfig
     from coordinator.watch.server import make_app
 
     host, port = _http(args.http)

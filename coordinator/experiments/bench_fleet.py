@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from coordinator.metrics import median, project_minutes
-from coordinator.runtime import FleetConfig
+from coordinator.run_config import FleetConfig
 
 
 class PssSampler:

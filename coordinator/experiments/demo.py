@@ -8,7 +8,7 @@ from pathlib import Path
 def surge_vs_greedy(cfg, fleet: dict, out: Path) -> list[str]:
     """Table lines comparing the distributed ``surge`` run, its in-process replay and ``greedy``; writes the map and the GIF.
 
-    ``cfg`` is the run's :class:`coordinator.runtime.FleetConfig`; ``fleet`` the distributed run's result.
+    ``cfg`` is the run's :class:`coordinator.run_config.FleetConfig`; ``fleet`` the distributed run's result.
     """
     from agents.base import make_policy
     from coordinator.experiments import figures

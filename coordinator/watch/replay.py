@@ -36,8 +36,8 @@ class Replay:
 
 
 def run_config(doc: dict, path: Path, fallback):
-    """The run's :class:`~coordinator.runtime.FleetConfig`: its ``config`` entry, else ``fallback`` sized by the file."""
-    from coordinator.runtime import FleetConfig
+    """The run's :class:`~coordinator.run_config.FleetConfig`: its ``config`` entry, else ``fallback`` sized by the file."""
+    from coordinator.run_config import FleetConfig
 
     known = {f.name for f in dataclasses.fields(FleetConfig)}
     if "config" in doc:

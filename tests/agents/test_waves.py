@@ -17,7 +17,7 @@ import pytest
 
 from agents.waves import plan_waves
 from city.sim import FleetSim, decisions_hash
-from coordinator.runtime import FleetConfig
+from coordinator.run_config import FleetConfig
 from tests.conftest import SHARED_DATA
 
 pytestmark = pytest.mark.usefixtures("compiled_kernels")

@@ -147,7 +147,7 @@ def test_an_outside_client_follows_a_run_and_rebuilds_every_taxis_position(tmp_p
     from bus.certs import make_certs
     from bus.router import free_tcp_port, wait_for_tcp
     from city.sim import FleetSim
-    from coordinator.runtime import FleetConfig
+    from coordinator.run_config import FleetConfig
 
     certs = tmp_path / "certs"
     make_certs(certs, 2)
@@ -239,7 +239,7 @@ def test_an_agent_on_another_city_refuses_to_join_at_once(capsys: pytest.Capture
 def test_across_an_hour_the_per_sector_forecasts_give_the_in_process_decisions() -> None:
     """62 minutes: the predictor service publishes hour 1's sectors mid-run, and taxis that moved meanwhile follow theirs."""
     from coordinator.fleet import in_process, run_local_fleet
-    from coordinator.runtime import FleetConfig
+    from coordinator.run_config import FleetConfig
 
     cfg = FleetConfig(run="hours", taxis=2, minutes=62, options={"forecast": "true-rate", "samples": 20, "horizon": 3},
                       deadline_s=120, join_timeout_s=300, predictor=True)

@@ -24,7 +24,7 @@ from bus.router import free_tcp_port, wait_for_tcp
 from city.errors import ConfigError
 from coordinator.cli import main
 from coordinator.fleet import in_process
-from coordinator.runtime import FleetConfig
+from coordinator.run_config import FleetConfig
 
 CLI = [sys.executable, "-m", "coordinator.cli"]
 HOSTILE = [sys.executable, str(Path(__file__).with_name("hostile.py"))]

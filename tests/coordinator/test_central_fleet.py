@@ -6,7 +6,8 @@ import pytest
 
 from city.errors import ConfigError
 from coordinator.fleet import in_process, run_local_fleet
-from coordinator.runtime import Coordinator, FleetConfig
+from coordinator.run_config import FleetConfig
+from coordinator.runtime import Coordinator
 
 
 @pytest.mark.parametrize(("policy", "options"), [("match", {}), ("rebalance", {"forecast": "true-rate", "lookahead": 6})])

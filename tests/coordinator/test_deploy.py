@@ -20,7 +20,7 @@ import pytest
 
 from bus.certs import make_certs
 from coordinator.fleet import in_process
-from coordinator.runtime import FleetConfig
+from coordinator.run_config import FleetConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 NETNS = ROOT / "deploy" / "netns.sh"

@@ -397,7 +397,8 @@ def test_a_checkpoint_restores_the_run_and_a_bad_one_is_one_line(tmp_path: Path)
     from dataclasses import asdict
 
     from coordinator import checkpoint
-    from coordinator.runtime import Coordinator, FleetConfig
+    from coordinator.run_config import FleetConfig
+    from coordinator.runtime import Coordinator
 
     cfg = FleetConfig(run="ck", taxis=3, minutes=5, options={"forecast": "true-rate", "samples": 4}, partition_timeout_s=0.3)
     coord = Coordinator(cfg, progress=False)
@@ -448,7 +449,8 @@ def test_a_checkpoint_restores_the_run_and_a_bad_one_is_one_line(tmp_path: Path)
 def _turn_rig(taxis: int, deadline_s: float):
     """A coordinator without a bus, and publishers that log the turns and commits it sends, in order."""
     from bus.wire import Control, Turn, decode
-    from coordinator.runtime import Coordinator, FleetConfig
+    from coordinator.run_config import FleetConfig
+    from coordinator.runtime import Coordinator
 
     cfg = FleetConfig(run="w", taxis=taxis, minutes=2, deadline_s=deadline_s, options={"forecast": "true-rate", "samples": 4})
     coord = Coordinator(cfg, progress=False)

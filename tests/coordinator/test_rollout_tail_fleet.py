@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from coordinator.fleet import in_process, run_local_fleet
-from coordinator.runtime import FleetConfig
+from coordinator.run_config import FleetConfig
 
 pytestmark = pytest.mark.usefixtures("compiled_kernels")
 

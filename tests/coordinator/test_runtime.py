@@ -18,7 +18,7 @@ import pytest
 from bus.certs import make_certs
 from bus.router import free_tcp_port, wait_for_tcp
 from coordinator.fleet import in_process, run_local_fleet
-from coordinator.runtime import FleetConfig
+from coordinator.run_config import FleetConfig
 
 CLI = [sys.executable, "-m", "coordinator.cli"]
 pytestmark = pytest.mark.usefixtures("compiled_kernels")

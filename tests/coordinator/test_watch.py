@@ -196,7 +196,7 @@ def test_a_replay_rebuilds_every_minute_of_the_run_from_its_controls(tmp_path: P
 
     from city.episode import run_episode
     from city.sim import FleetSim, decisions_hash
-    from coordinator.runtime import FleetConfig
+    from coordinator.run_config import FleetConfig
     from coordinator.watch.replay import build_replay
 
     cfg = FleetConfig(taxis=3, minutes=5, options={"forecast": "true-rate", "samples": 30})
