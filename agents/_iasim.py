@@ -75,10 +75,17 @@ def simulate_ia(
     heap: np.ndarray,
     tail: int = 0,
     place: np.ndarray = np.empty(0, dtype=np.int64),
+    home: np.ndarray = np.empty(0, dtype=np.int32),
 ) -> tuple[int, int]:
     """The instantaneous-assignment base policy for steps ``1 … horizon``; returns ``(Σ g_k + g_H, end)``.
 
     ``end`` is as in :func:`simulate_greedy`.
+
+    With ``home`` (one entry per taxi, modified) it is the ``rebalance``
+    base: a free taxi that the assignment leaves unmatched moves one hop
+    toward ``home[i]``, the rebalancing target it had at the decision minute,
+    unless it is -1 or reached; a taxi's target is dropped (-1) once it picks
+    up, since it came from a state the taxi has left.
 
     Every step, :func:`agents.ia.ia_controls`: broadcast of local eligibility
     commits the globally closest (distance, taxi, request) pair, retires both,
@@ -92,6 +99,7 @@ def simulate_ia(
     n_act = 0
     ai = 0
     cost = 0
+    homing = home.shape[0] > 0
     for i in range(mt):
         lb[i] = -1
     for k in range(1, horizon + 1):
@@ -163,12 +171,22 @@ def simulate_ia(
                 tpos[i] = drop
                 tfree[i] = k + 1 + max(1, np.int64(dist[v, drop]))
                 lb[i] = -1
+                if homing:
+                    home[i] = -1
                 if r >= r0:
                     for j in range(n_act):
                         if act[j] == r:
                             act[j] = act[n_act - 1]
                             n_act -= 1
                             break
+        if homing:
+            for f in range(nf):
+                i = free[f]
+                h = home[i]
+                if target[f] < 0 and h >= 0 and tpos[i] != h:
+                    tpos[i] = hop_t[h, tpos[i]]
+                    if lb[i] > 0:
+                        lb[i] -= 1
         cost += n_alive
     spared = 0
     if tail > 0:

@@ -216,6 +216,7 @@ def _run_samples(
     cycle: int,
     place_w: int,
     place: np.ndarray,
+    home: np.ndarray,
     plan_c: np.ndarray,
     plan_d: np.ndarray,
     base: int,
@@ -266,6 +267,7 @@ def _run_samples(
     matched = np.empty(mt, dtype=np.int64)
     need = np.empty(mt, dtype=np.bool_)
     heap = np.empty(mt + 1, dtype=np.int64)
+    thome = np.empty(home.shape[0], dtype=np.int32)
     use_shadow = base == GREEDY and ag >= 0 and shadow[0]
     # The reference of the shadow replays: the first candidate still in play that can be replayed (a
     # dropped candidate is not simulated to serve as one).
@@ -336,10 +338,13 @@ def _run_samples(
                 if c == ref:
                     n_ev = nev
             else:
+                # A target is dropped once its taxi picks up, at the decision minute too.
+                for i in range(thome.shape[0]):
+                    thome[i] = home[i] if tfree1[c, i] <= 1 else -1
                 cost, spared = simulate_ia(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
                     e_pick, e_drop, near, near_d, dist, dist_t, hop_t,
-                    act, lb, seen, free, best_d, best_c, target, matched, heap, tail, place,
+                    act, lb, seen, free, best_d, best_c, target, matched, heap, tail, place, thome,
                 )
             if tail > 0:
                 out[c, col] = _with_tail(g0 + cost, alive, r0 + n_arr, spared, tail, cycle)
@@ -363,6 +368,7 @@ def rollout_costs(
     cycle: int,
     place_w: int,
     place: np.ndarray,
+    home: np.ndarray,
     key: np.uint64,
     minute0: int,
     mode: int,
@@ -433,7 +439,7 @@ def rollout_costs(
         for chunk in range(g * n_chunks // n_groups, (g + 1) * n_chunks // n_groups):
             _run_samples(
                 s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
-                active, shadow, share, ag, tail, cycle, place_w, place, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop,
+                active, shadow, share, ag, tail, cycle, place_w, place, home, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop,
                 lists, lists_d, rel_node, sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals,
                 dist, dist_t, hop_t,
             )
@@ -460,6 +466,7 @@ def rollout_costs_serial(
     cycle: int,
     place_w: int,
     place: np.ndarray,
+    home: np.ndarray,
     key: np.uint64,
     minute0: int,
     mode: int,
@@ -495,7 +502,7 @@ def rollout_costs_serial(
     for chunk in range(n_chunks):
         _run_samples(
             s_lo + chunk * n_samples // n_chunks, s_lo + (chunk + 1) * n_samples // n_chunks, s_lo, out, settled,
-            active, shadow, share, ag, tail, cycle, place_w, place, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
+            active, shadow, share, ag, tail, cycle, place_w, place, home, plan_c, plan_d, base, horizon, key, minute0, mode, alive0, pos1, tfree1, e_pick, e_drop, near, near_d, rel_node,
             sectors, eta, pk_ptr, pk_node, pk_cum, dk_ptr, dk_node, dk_cum, beta_cum, max_arrivals, dist, dist_t, hop_t,
         )
     return out, settled

@@ -167,15 +167,36 @@ class Rebalance(Policy):
         return self._hours[hour_offset]
 
     def act(self, obs: Observation) -> np.ndarray:
-        m = self.last_matching = match_requests(self.city, obs, self.cost, self.wait_weight)
-        u = matched_controls(self.city, obs, m)
-        idle = np.setdiff1d(np.flatnonzero(obs.tau == 0), m.taxis)
-        self.last_targets = None
-        if idle.size == 0:
-            return u
         fc, anchors = self.hour_data(obs.t // 60)
-        sectors, worth = slot_values(fc.eta * self.lookahead, covered(self.city, obs, m, self.lookahead), idle.size, self.value)
-        target = rebalance_targets(self.city, obs.pos[idle], anchors, sectors, worth)
-        self.last_targets = target
-        u[idle] = self.city.next_hop[obs.pos[idle], target]
+        u, home, m = rebalance_plan(self.city, obs, fc.eta, anchors, self.lookahead, self.value, self.cost, self.wait_weight)
+        self.last_matching = m
+        idle = np.flatnonzero((obs.tau == 0) & (home >= 0))
+        self.last_targets = None if idle.size == 0 else home[idle]
         return u
+
+
+def rebalance_plan(city: City, obs: Observation, eta: np.ndarray, anchors: np.ndarray, lookahead: int = 6, value: float = 2000.0,
+                   cost: str = "sqrt", wait_weight: float = 0.1) -> tuple[np.ndarray, np.ndarray, Matching]:
+    """``rebalance``'s joint control of a minute, each taxi's rebalancing target, and the matching.
+
+    Returns
+    -------
+    controls : ndarray of int32 (m,)
+    home : ndarray of int32 (m,)
+        The target intersection of each idle taxi (one left free after the
+        matching; its own node when it stays), -1 for every other taxi.  The
+        rollout base ``rebalance`` keeps these targets for the minutes it
+        simulates (:mod:`agents._iasim`).
+    matching : Matching
+    """
+    m = match_requests(city, obs, cost, wait_weight)
+    u = matched_controls(city, obs, m).astype(np.int32)
+    home = np.full(obs.pos.size, -1, dtype=np.int32)
+    idle = np.setdiff1d(np.flatnonzero(obs.tau == 0), m.taxis)
+    if idle.size == 0:
+        return u, home, m
+    sectors, worth = slot_values(np.asarray(eta, dtype=np.float64) * lookahead, covered(city, obs, m, lookahead), idle.size, value)
+    target = rebalance_targets(city, obs.pos[idle], anchors, sectors, worth)
+    home[idle] = target
+    u[idle] = city.next_hop[obs.pos[idle], target]
+    return u, home, m

@@ -73,10 +73,12 @@ from agents import _kernels as K
 from agents._adaptive import best_candidate, eliminate
 from agents.demand_tables import DemandTables
 from agents.greedy import greedy_controls
-from agents.place_values import place_values
 from agents.ia import ia_controls
+from agents.place_values import place_values
+from agents.rebalance import rebalance_plan, sector_anchors
 from agents.rollout_config import BASES, CE_MODES, NEAR_K, RolloutConfig
 from agents.shortcuts import MINUTE_NEAR_K, PlanStats, Shortcuts, transposed
+from city.errors import ConfigError
 from city.forecast import Forecast
 from city.graph import City
 from city.sim import PICKUP, Observation
@@ -106,6 +108,9 @@ class StepContext:
     arrival_spots : dict
         Per set of sampled sectors, the nodes where an arrival within the
         horizon can be picked up (:func:`_pickup_spots`): agents of one area share it.
+    home : ndarray of int32 (m,) or (0,)
+        With the ``rebalance`` base, each taxi's rebalancing target of the
+        minute (-1: none), which the simulated taxis keep; empty otherwise.
     """
 
     city: City
@@ -119,27 +124,64 @@ class StepContext:
     near_d: np.ndarray | None = None
     stats: PlanStats = field(default_factory=PlanStats)
     arrival_spots: dict[bytes, np.ndarray] = field(default_factory=dict, repr=False)
+    home: np.ndarray = field(default_factory=lambda: _NO_HOME)
 
 
-def base_controls(city: City, config: RolloutConfig, obs: Observation) -> np.ndarray:
-    """The base policy's joint control for the minute: what agents after the decider play, and a silent agent's fallback."""
+_NO_HOME = np.empty(0, dtype=np.int32)
+
+
+@dataclass(frozen=True)
+class HourInputs:
+    """What the ``rebalance`` base needs of the hour's forecast: the rates and the sectors' anchors, computed once an hour."""
+
+    eta: np.ndarray
+    anchors: np.ndarray
+
+    @classmethod
+    def of(cls, city: City, forecast: Forecast) -> HourInputs:
+        return cls(eta=np.asarray(forecast.eta, dtype=np.float64), anchors=sector_anchors(city, forecast.rho))
+
+
+def base_controls(city: City, config: RolloutConfig, obs: Observation, hour: HourInputs | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The base policy's joint control for the minute (what agents after the decider play, and a silent agent's fallback) and its targets.
+
+    The targets are the ``rebalance`` base's (:func:`agents.rebalance.rebalance_plan`
+    at its default settings, with the forecast of ``hour``), an empty array for
+    the other bases.
+    """
+    if config.base == "rebalance":
+        if hour is None:
+            raise ConfigError("rollout: the rebalance base needs the hour's forecast")
+        u, home, _ = rebalance_plan(city, obs, hour.eta, hour.anchors)
+        return u, home
     base = greedy_controls(city, obs) if config.base == "greedy" else ia_controls(city, obs)
-    return base.astype(np.int32)
+    return base.astype(np.int32), _NO_HOME
 
 
 def prepare_step(city: City, config: RolloutConfig, obs: Observation, tables: DemandTables, minute0: int,
-                 shortcuts: Shortcuts | None = None, base: np.ndarray | None = None) -> StepContext:
+                 shortcuts: Shortcuts | None = None, base: np.ndarray | None = None, home: np.ndarray | None = None,
+                 hour: HourInputs | None = None) -> StepContext:
     """The shared per-minute context: the base policy's joint control and, with the shortcut, the nearest-request lists.
 
-    ``base`` is that joint control when it is already known (an agent gets
-    it with the state), so that it is computed once per minute, not per agent.
+    ``base`` (and with the ``rebalance`` base its ``home`` targets) is that
+    joint control when it is already known (an agent gets it with the
+    state), so that it is computed once per minute, not per agent; otherwise
+    it is computed here, from ``hour`` for the ``rebalance`` base.
     """
     sc = shortcuts or Shortcuts()
     near = near_d = None
     if sc.minute_lists and obs.req_pickup.size:
         near, near_d = K.nearest_lists(city.dist, np.ascontiguousarray(obs.req_pickup, dtype=np.int32), MINUTE_NEAR_K)
-    base = base_controls(city, config, obs) if base is None else np.asarray(base, dtype=np.int32)
-    return StepContext(city, config, obs, base, tables, int(minute0), sc, near, near_d)
+    if base is None:
+        base, home = base_controls(city, config, obs, hour)
+    base = np.asarray(base, dtype=np.int32)
+    if config.base == "rebalance":
+        if home is None or len(home) != base.size:
+            raise ConfigError("rollout: the rebalance base needs every taxi's target with the minute's base controls")
+        home = np.ascontiguousarray(home, dtype=np.int32)
+    else:
+        home = _NO_HOME
+    return StepContext(city, config, obs, base, tables, int(minute0), sc, near, near_d, home=home)
 
 
 def candidate_controls(city: City, obs: Observation, agent: int) -> np.ndarray:
@@ -174,6 +216,7 @@ class _Inputs:
     ag: int
     shadow: np.ndarray
     place: np.ndarray
+    home: np.ndarray
 
 
 def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _Inputs:
@@ -252,7 +295,8 @@ def _decision_inputs(ctx: StepContext, committed: np.ndarray, agent: int) -> _In
     # With a tail the agent's end position is part of every cost: no candidate's cost is another's.
     shadow = (cands != PICKUP) & (sc.shadow and greedy and not cfg.tail and not cfg.place)
     place = place_values(city, tab, sectors) if cfg.place else _NO_PLACE
-    return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow), place=place)
+    home = np.ascontiguousarray(ctx.home[taxis]) if ctx.home.size else _NO_HOME
+    return _Inputs(cands=cands, skip=skip, args=args, ag=ag, shadow=np.ascontiguousarray(shadow), place=place, home=home)
 
 
 _NO_PLACE = np.empty(0, dtype=np.int64)
@@ -298,7 +342,7 @@ def _run(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarra
 def kernel_args(ctx: StepContext, inp: _Inputs, s_lo: int, s_hi: int, active: np.ndarray) -> tuple:
     """The arguments of either rollout kernel for samples ``s_lo … s_hi-1`` of a decision, all but the chunk count."""
     cfg = ctx.config
-    return (BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, cfg.tail, cfg.cycle, cfg.place, inp.place, *inp.args)
+    return (BASES[cfg.base], cfg.horizon, s_lo, s_hi, active, inp.shadow, ctx.shortcuts.share, inp.ag, cfg.tail, cfg.cycle, cfg.place, inp.place, inp.home, *inp.args)
 
 
 def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np.ndarray, np.ndarray]:
@@ -473,4 +517,5 @@ def warm_up(city: City | None = None, config: RolloutConfig | None = None, seria
     cfg = replace(config, samples=2)
     obs = Observation(t=0, pos=nodes[:1], tau=np.zeros(1, np.int32), dest=np.full(1, -1, np.int32), req_index=np.zeros(1, np.int64),
                       req_pickup=nodes[:1], req_dropoff=nodes[-1:], req_entry=np.zeros(1, np.int32))
-    _plan(prepare_step(city, cfg, obs, DemandTables.build(city, fc, cfg.ce, cfg.seed), 0), np.empty(0, np.int32), 0, serial)
+    hour = HourInputs.of(city, fc) if cfg.base == "rebalance" else None
+    _plan(prepare_step(city, cfg, obs, DemandTables.build(city, fc, cfg.ce, cfg.seed), 0, hour=hour), np.empty(0, np.int32), 0, serial)

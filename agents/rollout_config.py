@@ -7,7 +7,9 @@ from dataclasses import dataclass
 from agents import _kernels as K
 from city.errors import ConfigError
 
-BASES = {"greedy": K.GREEDY, "ia": K.IA}
+#: Base policies by name and the kernel that simulates each: ``rebalance`` is the ``ia`` simulation with each
+#: taxi's rebalancing target of the decision minute (:func:`agents._iasim.simulate_ia`).
+BASES = {"greedy": K.GREEDY, "ia": K.IA, "rebalance": K.IA}
 SCOPES = ("local", "map")
 #: Certainty equivalence by name, and the arrival counts each samples.
 CE_MODES = {"limited": K.LIMITED_CE, "standard": K.STANDARD_CE, "counts": K.STANDARD_CE}
@@ -28,7 +30,12 @@ class RolloutConfig:
     samples : int
         Monte-Carlo samples per agent decision.
     base : str
-        Base policy: ``greedy`` or ``ia``.
+        Base policy: ``greedy``, ``ia`` or ``rebalance``.  ``rebalance`` plays
+        the ``rebalance`` policy (default settings) at the decision minute;
+        in the minutes it simulates, the taxis follow instantaneous
+        assignment, and a free taxi left unmatched heads for the rebalancing
+        target it was given at the decision minute (computed once per real
+        minute, not per sample).
     scope : str
         Where future requests are sampled: ``local`` (the agent's sector and
         its adjacent sectors) or ``map`` (every sector).

@@ -36,7 +36,7 @@ import numpy as np
 from agents.base import EpisodeContext, Option, Policy, register, split_policy
 from agents.demand_tables import DemandTables
 from agents.forecast_providers import PROVIDERS, make_provider
-from agents.rollout import StepContext, plan_agent, prepare_step
+from agents.rollout import HourInputs, StepContext, plan_agent, prepare_step
 from agents.rollout_config import BASES, CE_MODES, SCOPES, RolloutConfig, default_prune
 from agents.shortcuts import PlanStats, Shortcuts
 from agents.waves import plan_waves
@@ -115,6 +115,7 @@ class RolloutPolicy(Policy):
         self.provider: ForecastProvider = make_provider(forecast or self.defaults["forecast"], model)
         self.context: EpisodeContext | None = None
         self._tables: dict[int, DemandTables] = {}
+        self._hour_inputs: dict[int, HourInputs] = {}
         self._pool = None
         self.last_waves = None
 
@@ -165,6 +166,7 @@ class RolloutPolicy(Policy):
             raise ConfigError(f"policy {self.name!r} needs the episode's demand world for its forecasts")
         self.context = context
         self._tables = {}
+        self._hour_inputs = {}
 
     def forecast(self, hour_offset: int) -> Forecast:
         """The provider's forecast of the hour ``hour_offset`` hours after the episode's start."""
@@ -179,9 +181,18 @@ class RolloutPolicy(Policy):
             self._tables[hour_offset] = DemandTables.build(self.city, self.forecast(hour_offset), self.config.ce, self.config.seed)
         return self._tables[hour_offset]
 
+    def hour_inputs(self, hour_offset: int) -> HourInputs | None:
+        """The forecast's rates and sector anchors of an hour, which the ``rebalance`` base needs (``None`` for the other bases)."""
+        if self.config.base != "rebalance":
+            return None
+        if hour_offset not in self._hour_inputs:
+            self._hour_inputs[hour_offset] = HourInputs.of(self.city, self.forecast(hour_offset))
+        return self._hour_inputs[hour_offset]
+
     def step_context(self, obs: Observation) -> StepContext:
         """The shared context of minute ``obs.t``."""
-        return prepare_step(self.city, self.config, obs, self.tables(obs.t // 60), obs.t % 60, self.shortcuts)
+        hour = obs.t // 60
+        return prepare_step(self.city, self.config, obs, self.tables(hour), obs.t % 60, self.shortcuts, hour=self.hour_inputs(hour))
 
     def act(self, obs: Observation) -> np.ndarray:
         ctx = self.step_context(obs)

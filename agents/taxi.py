@@ -433,7 +433,7 @@ class TaxiAgent:
                 tables = self.forecasts.tables(hour, sectors)
             if tables is None:
                 return
-            self.context = prepare_step(self.city, self.rollout, obs, tables, obs.t % 60, base=self.view.base)
+            self.context = prepare_step(self.city, self.rollout, obs, tables, obs.t % 60, base=self.view.base, home=self.view.home)
 
     def _maybe_plan(self, out) -> None:
         turn, obs = self.pending, self.view.obs

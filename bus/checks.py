@@ -83,6 +83,7 @@ def check_state(msg: State, key: str, b: Bounds) -> State:
         _within(key, name, getattr(msg, name), 0, b.nodes)
     _within(key, "new_entry", msg.new_entry, 0, msg.t + 1)
     _within(key, "base", msg.base, -1, b.nodes)
+    _within(key, "home", msg.home, -1, b.nodes)
     for name in ("new_index", "picked"):
         arr = getattr(msg, name)
         _within(key, name, arr, 0, np.iinfo(np.int32).max)

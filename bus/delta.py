@@ -14,10 +14,11 @@ from bus.wire import State
 from city.sim import Observation
 
 
-def state_message(obs: Observation, previous: np.ndarray | None, base: np.ndarray, epoch: int = 0) -> State:
+def state_message(obs: Observation, previous: np.ndarray | None, base: np.ndarray, epoch: int = 0, home: np.ndarray | None = None) -> State:
     """The state of minute ``obs.t`` as a delta against the outstanding request indices ``previous``, with the minute's ``base`` controls.
 
-    ``previous=None`` gives a full state; ``epoch`` is the sending coordinator's run epoch.
+    ``previous=None`` gives a full state; ``epoch`` is the sending coordinator's run epoch; ``home``
+    the ``rebalance`` base's targets (none by default).
     """
     full = previous is None
     now = np.asarray(obs.req_index, dtype=np.int64)
@@ -26,7 +27,8 @@ def state_message(obs: Observation, previous: np.ndarray | None, base: np.ndarra
     return State(
         t=int(obs.t), full=full, pos=obs.pos, tau=obs.tau, dest=obs.dest,
         new_index=now[new].astype(np.int32), new_pickup=obs.req_pickup[new], new_dropoff=obs.req_dropoff[new],
-        new_entry=obs.req_entry[new], picked=picked, outstanding=int(now.size), base=base, epoch=epoch,
+        new_entry=obs.req_entry[new], picked=picked, outstanding=int(now.size), base=base,
+        home=np.empty(0, dtype=np.int32) if home is None else home, epoch=epoch,
     )
 
 
@@ -35,8 +37,9 @@ class StateView:
 
     def __init__(self) -> None:
         self.obs: Observation | None = None
-        #: The base policy's joint control of minute ``obs.t``, as the coordinator computed it.
+        #: The base policy's joint control of minute ``obs.t``, as the coordinator computed it, and the ``rebalance`` base's targets.
         self.base: np.ndarray | None = None
+        self.home: np.ndarray | None = None
         self._req: dict[int, tuple[int, int, int]] = {}
 
     def apply(self, msg: State) -> bool:
@@ -60,4 +63,5 @@ class StateView:
             req_entry=np.ascontiguousarray(rows[:, 2]),
         )
         self.base = msg.base
+        self.home = msg.home
         return True

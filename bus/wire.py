@@ -25,8 +25,8 @@ from city.errors import SurgeError
 #: The zenoh encoding every payload of the run carries.
 ENCODING = "application/msgpack"
 #: Bumped whenever a message gains, loses or changes a field (docs/PROTOCOL.md, versioning).
-#: Version 3 added the run epoch to State, Turn, Control and Stop.
-WIRE_VERSION = 3
+#: Version 3 added the run epoch to State, Turn, Control and Stop; version 4 the ``rebalance`` base's targets to State.
+WIRE_VERSION = 4
 
 
 class WireError(SurgeError, ValueError):
@@ -222,14 +222,16 @@ class State(Message):
     ``outstanding`` lets a receiver check that its copy kept up.  ``base`` is
     the base policy's joint control for minute ``t`` (a node id per taxi, or
     −1 for a pickup; a busy taxi's next hop), computed once by the
-    coordinator so that no agent recomputes it.  ``epoch`` is the run epoch
+    coordinator so that no agent recomputes it; with the ``rebalance`` base,
+    ``home`` is each taxi's rebalancing target of the minute (-1: none),
+    empty for the other bases.  ``epoch`` is the run epoch
     of the coordinator that sent it (:attr:`Turn.epoch`).
     """
 
     kind: ClassVar[str] = "state"
     arrays: ClassVar[dict[str, str]] = {
         "pos": I32, "tau": I32, "dest": I32, "new_index": I32, "new_pickup": I32, "new_dropoff": I32, "new_entry": I32, "picked": I32,
-        "base": I32,
+        "base": I32, "home": I32,
     }
     t: int
     full: bool
@@ -243,12 +245,15 @@ class State(Message):
     picked: np.ndarray
     outstanding: int
     base: np.ndarray
+    home: np.ndarray
     epoch: int
 
     def __post_init__(self) -> None:
         m, k = len(self.pos), len(self.new_index)
         if len(self.tau) != m or len(self.dest) != m or len(self.base) != m:
             raise ValueError(f"state {self.t}: pos, tau, dest and base must have one entry per taxi")
+        if len(self.home) not in (0, m):
+            raise ValueError(f"state {self.t}: home must be empty or have one entry per taxi")
         if not (len(self.new_pickup) == len(self.new_dropoff) == len(self.new_entry) == k):
             raise ValueError(f"state {self.t}: new_index, new_pickup, new_dropoff and new_entry differ in length")
 

@@ -89,7 +89,7 @@ def test_bad_messages_name_the_key_and_field(payload: bytes, message: str) -> No
 
 def test_bad_arrays_are_caught() -> None:
     good = State(t=0, full=True, pos=[1, 2], tau=[0, 0], dest=[-1, -1], new_index=[], new_pickup=[], new_dropoff=[],
-                 new_entry=[], picked=[], outstanding=0, base=[1, -1], epoch=0)
+                 new_entry=[], picked=[], outstanding=0, base=[1, -1], home=[], epoch=0)
     raw = msgpack.unpackb(good.encode())
     raw["pos"] = b"\x00\x00\x00"
     with pytest.raises(WireError, match="field 'pos': expected int32 bytes"):
