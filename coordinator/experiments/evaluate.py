@@ -270,9 +270,13 @@ def evaluate(
     # Instances of the checkpoint that lack some policies' rows (see coordinator.experiments.reproduce's
     # --refresh-model) keep the rows they have and run only the rest.
     pending: dict[tuple[str, int, int], dict[str, dict]] = {}
+    # Rows of the checkpoint outside this run's instances (more seeds than it asks for) stay in the file.
+    beyond: list[dict] = []
     if resume and checkpoint is not None and Path(checkpoint).exists():
         wanted = set(grid)
-        held = by_instance(e for e in load_finished(cfg, checkpoint) if instance_key(e) in wanted)
+        finished = load_finished(cfg, checkpoint)
+        beyond = [e for e in finished if instance_key(e) not in wanted]
+        held = by_instance(e for e in finished if instance_key(e) in wanted)
         for key, rows in held.items():
             if set(cfg.policies) <= rows.keys():
                 episodes.extend(rows.values())
@@ -306,7 +310,7 @@ def evaluate(
             "demand_source": demand_source(scen.world),
             "city": scen.city.summary(),
             "config": asdict(cfg),
-            "episodes": sorted(episodes + [e for rows in pending.values() for e in rows.values()], key=lambda e: order[instance_key(e)]),
+            "episodes": sorted(episodes + [e for rows in pending.values() for e in rows.values()], key=lambda e: order[instance_key(e)]) + beyond,
         }
 
     def report(k: int, rows: list[dict]) -> None:

@@ -15,7 +15,7 @@ import time
 import msgpack
 import zenoh
 
-WIRE = 3
+WIRE = 4
 ENCODING = "application/msgpack"
 
 

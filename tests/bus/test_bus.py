@@ -77,7 +77,7 @@ def test_every_message_round_trips_exactly() -> None:
         (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": 1}), "turn has no field 'agent'"),
         (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": "1", "agent": 0}), "field 't' is str, expected int"),
         (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": True, "agent": 0}), "field 't' is bool, expected int"),
-        (msgpack.packb({"v": 2, "kind": "turn", "t": 1, "agent": 0, "deps": b"", "controls": b""}), "wire version 2, expected 3"),
+        (msgpack.packb({"v": 3, "kind": "turn", "t": 1, "agent": 0, "deps": b"", "controls": b""}), "wire version 3, expected 4"),
         (msgpack.packb({"v": WIRE_VERSION, "kind": "turn", "t": 1, "agent": 0, "deps": b"", "controls": b""}), "turn has no field 'epoch'"),
     ],
 )

@@ -257,6 +257,17 @@ def test_a_resumed_run_may_add_policies_but_not_drop_them(small_run: dict, tmp_p
         evaluate(narrower, progress=lambda _msg: None, checkpoint=path, resume=True)
 
 
+def test_a_resumed_run_of_fewer_seeds_keeps_the_others_rows(small_run: dict, tmp_path: Path) -> None:
+    """Adding a policy seed by seed (``--seeds 1`` on a file of 2) loses no row of the seeds it does not ask for."""
+    path = tmp_path / "run.json"
+    write_json({**small_run, "config": {**small_run["config"], "policies": ["greedy", "oracle"]},
+                "episodes": [e for e in small_run["episodes"] if e["policy"] != "ia"]}, path)
+    first = EvalConfig(hours=[19], seeds=1, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
+    evaluate(first, progress=lambda _msg: None, checkpoint=path, resume=True)
+    kept = {(e["seed"], e["policy"]) for e in json.loads(path.read_text())["episodes"]}
+    assert kept == {(0, "greedy"), (0, "ia"), (0, "oracle"), (1, "greedy"), (1, "oracle")}
+
+
 def test_an_interrupted_instance_resumes_from_its_finished_episodes(small_run: dict, tmp_path: Path) -> None:
     from coordinator.experiments.evaluate import _instance
     from coordinator.experiments.results import episode_dir

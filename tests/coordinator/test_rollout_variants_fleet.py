@@ -1,4 +1,4 @@
-"""A ``surge`` with a tail or place values in the distributed fleet: one process per taxi over a real zenoh router, the in-process decisions."""
+"""``surge`` variants in the distributed fleet (a tail, place values, the rebalance base): one process per taxi over a real zenoh router, the in-process decisions."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ from coordinator.run_config import FleetConfig
 pytestmark = pytest.mark.usefixtures("compiled_kernels")
 
 
-@pytest.mark.parametrize("end", [{"tail": 20, "cycle": 8}, {"place": 2}])
-def test_distributed_surge_with_a_tail_makes_the_in_process_decisions(end: dict) -> None:
-    """The tail or place values travel in the run spec's rollout settings; every agent plans with them,
-    the place values from the forecast of its own sectors."""
+@pytest.mark.parametrize("end", [{"tail": 20, "cycle": 8}, {"place": 2}, {"base": "rebalance"}])
+def test_distributed_surge_variants_make_the_in_process_decisions(end: dict) -> None:
+    """The variant travels in the run spec's rollout settings; every agent plans with it, the place
+    values from the forecast of its own sectors, the rebalance base with the targets each state carries."""
     cfg = FleetConfig(run="same-surge-tail", taxis=3, minutes=8, policy="surge",
                       options={"forecast": "true-rate", "samples": 100, **end}, deadline_s=120,
                       join_timeout_s=300, predictor=False)
