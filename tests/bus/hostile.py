@@ -41,7 +41,7 @@ def try_open(conf: zenoh.Config):
 
 
 #: The wire version of docs/PROTOCOL.md: what an outsider writes from the document.
-WIRE = 3
+WIRE = 4
 
 
 def control(t: int, agent: int, value: int, **extra) -> bytes:
@@ -157,7 +157,7 @@ def fuzz_payload(rng: random.Random, agent: int, now: int, epoch: int) -> bytes:
               "control": rng.choice([-7, 2**40, 10**6]), "by": rng.choice(["agent", "base", "x"]),
               "plan_s": rng.choice([0.0, -1.0, math.nan, math.inf]), "rss_mb": rng.choice([0.0, 1e300, -3.0]),
               "epoch": rng.choice([epoch, epoch, epoch - 1, -1, 2**64 - 1])}
-    return msgpack.packb({"v": rng.choice([1, 2, 2, 3]), "kind": rng.choice(["control", "control", "turn"]), **fields},
+    return msgpack.packb({"v": rng.choice([2, 3, 3, 4]), "kind": rng.choice(["control", "control", "turn"]), **fields},
                          use_bin_type=True)
 
 
