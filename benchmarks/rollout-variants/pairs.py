@@ -29,8 +29,10 @@ def load() -> dict[str, dict[tuple, dict]]:
         doc = json.loads(f.read_text())
         if doc.get("schema") != "surge.rollout-variants/1":
             continue
+        # The real map at its real 2022 hourly level is another world than at its 2018 zone-profile level.
+        world = doc["scenario"] + (" (real level)" if doc.get("demand_source", "").startswith("hourly-totals") else "")
         for e in doc["episodes"]:
-            out[doc["scenario"]][(e["date"], e["hour"], e["seed"], e["policy"])] = e
+            out[world][(e["date"], e["hour"], e["seed"], e["policy"])] = e
     return out
 
 

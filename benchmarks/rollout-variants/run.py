@@ -28,6 +28,7 @@ from agents.base import EpisodeContext, make_policy, parse_policy
 from city.episode import episode_requests, initial_positions, run_episode
 from city.scenario import load_scenario
 from coordinator.experiments import evaluate as E
+from coordinator.experiments.results import demand_source
 
 
 def main() -> None:
@@ -51,8 +52,11 @@ def main() -> None:
         "scenario": a.scenario, "taxis": a.taxis, "minutes": a.minutes,
         "episodes": [],
     }
-    done = {(e["date"], e["hour"], e["seed"], e["policy"]) for e in doc["episodes"]}
     scen = load_scenario(a.scenario, a.data)
+    source = demand_source(scen.world)
+    if doc.setdefault("demand_source", source) != source:
+        raise SystemExit(f"{path}: was written with demand source {doc['demand_source']!r}, this run has {source!r}")
+    done = {(e["date"], e["hour"], e["seed"], e["policy"]) for e in doc["episodes"]}
     for seed in a.seeds:
         for date_text in a.dates:
             for hour in a.hours:

@@ -220,6 +220,7 @@ def _plan_child(cfg: PlanBench, label: str) -> dict:
         options["workers"] = cfg.workers
     policy = make_policy(name, scen.city, **options)
     policy.reset(episode)
+    rollout = getattr(policy, "config", None)
     variants = {v: shortcut_variant(v) for v in cfg.variants}
     # One untimed call loads the compiled kernels from numba's cache (or compiles them).
     t0 = time.perf_counter()
@@ -233,7 +234,8 @@ def _plan_child(cfg: PlanBench, label: str) -> dict:
         n_free = int((obs.tau == 0).sum())
         free.append(n_free)
         outstanding.append(int(obs.req_index.size))
-        critical.append(plan_waves(scen.city, obs, policy.config.prune).critical_path)
+        # A central policy (match, rebalance) computes the joint control at once: one wave.
+        critical.append(plan_waves(scen.city, obs, rollout.prune).critical_path if rollout else 1)
         applied = None
         for v, shortcuts in variants.items():
             policy.shortcuts = shortcuts
@@ -242,9 +244,9 @@ def _plan_child(cfg: PlanBench, label: str) -> dict:
             rec = per_variant[v]
             rec["plan_seconds"].append(time.perf_counter() - t0)
             rec["cpu_seconds"].append(time.process_time() - c0)
-            st = policy.last_stats
-            rec["settled_share"].append(st.settled / st.decisions if st.decisions else 0.0)
-            total = st.cand_samples + st.shadowed
+            st = getattr(policy, "last_stats", None)
+            rec["settled_share"].append(st.settled / st.decisions if st and st.decisions else 0.0)
+            total = st.cand_samples + st.shadowed if st else 0
             rec["shadow_share"].append(st.shadowed / total if total else 0.0)
             rec["hashes"].append(hashlib.sha256(np.asarray(u, np.int32).tobytes()).hexdigest()[:16])
             if applied is None:
@@ -266,14 +268,14 @@ def _plan_child(cfg: PlanBench, label: str) -> dict:
         "threads": numba.get_num_threads(),
         "workers": cfg.workers,
         "peak_rss_mb": peak_rss_mb(),
-        "rollout": dataclasses.asdict(policy.config),
-        "approximations": policy.config.approximations(),
+        "rollout": dataclasses.asdict(rollout) if rollout else None,
+        "approximations": rollout.approximations() if rollout else "exact",
         "city": scen.city.summary(),
     }
 
 
 def bench_plan(cfg: PlanBench) -> int:
-    """Planning seconds per step of each rollout policy, each in a fresh ``spawn`` process.
+    """Planning seconds per step of each policy (rollout or central), each in a fresh ``spawn`` process.
 
     The fleet plays greedy for ``--warmup`` minutes from a seeded placement at
     ``--date --hour`` to reach a mid-episode state; then the policy plans

@@ -163,6 +163,20 @@ def test_bench_plan_reports_variants_side_by_side(tmp_path: Path) -> None:
     assert bad.returncode != 0 and "unknown variant 'no-magic'" in bad.stderr
 
 
+def test_bench_plan_times_central_policies_beside_rollout(tmp_path: Path) -> None:
+    """``match`` and ``rebalance`` compute the joint control at once: timed like the rollout policies, one wave a step."""
+    from tests.coordinator.test_cli import run_cli
+
+    out = tmp_path / "plan.json"
+    proc = run_cli("bench", "plan", "--taxis", "12", "--samples", "8", "--horizon", "3", "--steps", "2", "--warmup", "2",
+                   "--policies", "match", "rebalance", "--forecast", "true-rate", "--json", str(out))
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(out.read_text())["policies"]
+    for name in ("match", "rebalance"):
+        assert res[name]["approximations"] == "exact" and res[name]["rollout"] is None
+        assert res[name]["critical_path"] == [1, 1] and len(res[name]["plan_seconds"]) == 2
+
+
 def test_kernel_cache_is_keyed_by_every_kernel_source(tmp_path: Path) -> None:
     """A change to any module that defines a kernel moves numba's cache; other modules do not."""
     import subprocess
