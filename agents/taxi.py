@@ -40,8 +40,8 @@ This module must not import torch: forecasts arrive on the bus.
 
 from __future__ import annotations
 
-import logging
 import dataclasses
+import logging
 import resource
 import time
 from dataclasses import dataclass

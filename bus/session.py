@@ -13,9 +13,9 @@ router enforces the access rules of :mod:`bus.access`.
 
 from __future__ import annotations
 
-import logging
 import dataclasses
 import json
+import logging
 import queue
 from contextlib import contextmanager
 from dataclasses import dataclass, field

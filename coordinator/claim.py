@@ -17,8 +17,8 @@ that the new one waits for.
 
 from __future__ import annotations
 
-import logging
 import datetime as dt
+import logging
 import time
 from collections.abc import Iterable
 from contextlib import ExitStack

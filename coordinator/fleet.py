@@ -14,8 +14,8 @@ the two runs' decisions are compared.
 
 from __future__ import annotations
 
-import logging
 import json
+import logging
 import socket
 import sys
 import tempfile

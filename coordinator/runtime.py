@@ -35,8 +35,8 @@ handling one, ends the run.
 
 from __future__ import annotations
 
-import logging
 import datetime as dt
+import logging
 import os
 import time
 from contextlib import ExitStack

@@ -12,8 +12,8 @@ request gets an error reply naming the field, and the service keeps serving.
 
 from __future__ import annotations
 
-import logging
 import datetime as dt
+import logging
 import sys
 from dataclasses import dataclass
 from pathlib import Path

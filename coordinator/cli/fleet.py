@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import logging
 import argparse
 import json
+import logging
 import os
 import time
 from pathlib import Path

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import logging
 import argparse
 import json
+import logging
 from pathlib import Path
 
 from city.errors import DataError, SurgeError

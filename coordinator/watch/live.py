@@ -9,9 +9,9 @@ thread; callbacks only enqueue (:class:`bus.session.Inbox`).
 
 from __future__ import annotations
 
-import logging
 import datetime as dt
 import json
+import logging
 import threading
 import time
 from dataclasses import dataclass
