@@ -113,6 +113,8 @@ class Steps(Protocol):
 
 
 class _NoSteps:
+    """The counter where nothing shows steps."""
+
     def update(self, n: int = 1) -> None:
         pass
 
@@ -140,7 +142,8 @@ def set_steps(factory: StepsFactory | None) -> None:
 def steps(total: int, unit: str, desc: str) -> Steps:
     """A counter for ``total`` steps of long work, to be closed when it ends (it is a context manager).
 
-    Shown only where the application installed a factory (:func:`set_steps`);
-    the work's own log lines say what each step did either way.
+    Shown only where the application installed a factory (:func:`set_steps`)
+    and there is work to count; the work's own log lines say what each step
+    did either way.
     """
-    return _factory(total=total, unit=unit, desc=desc) if _factory is not None else _NoSteps()
+    return _factory(total=total, unit=unit, desc=desc) if _factory is not None and total > 0 else _NoSteps()
