@@ -41,8 +41,8 @@ This module must not import torch: forecasts arrive on the bus.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import resource
-import sys
 import time
 from dataclasses import dataclass
 
@@ -87,6 +87,9 @@ from bus.wire import (
 )
 from city.errors import ConfigError, SurgeError
 from city.fingerprint import city_sha256, code_version
+from city.logs import inherit
+
+_logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -117,8 +120,9 @@ STALL_S = 1.0
 GONE_NOTICE_S = 1.0
 
 
-def log(index: int, message: str) -> None:
-    print(f"surge agent {index}: {message}", file=sys.stderr, flush=True)
+def log(index: int, message: str, level: int = logging.INFO) -> None:
+    """A line of agent ``index``: ``surge agent 3: …`` (:class:`city.logs.LineFormatter`)."""
+    _logger.log(level, "%s", message, extra={"who": f"agent {index}"})
 
 
 class TaxiAgent:
@@ -248,7 +252,7 @@ class TaxiAgent:
                             f"{mine[:16]}…, the coordinator's {spec.city_sha256[:16]}… (same sizes, other streets, sectors "
                             f"or pickup intersections; rebuild the city from the same data)")
         if spec.code != code_version():
-            log(self.me, f"warning: this host runs {code_version()}, the coordinator {spec.code}; decisions may differ from its reference")
+            log(self.me, f"this host runs {code_version()}, the coordinator {spec.code}; decisions may differ from its reference", logging.WARNING)
         self.city, self.rollout = city, rollout
         self.central = policy_class(spec.policy).central
         bounds = Bounds(taxis=spec.taxis, nodes=city.n_nodes, sectors=city.n_sectors, minutes=spec.minutes)
@@ -475,10 +479,11 @@ class OtherCity(ConfigError):
 
 def agent_main(config: AgentConfig) -> int:
     """Entry point of a spawned agent process: run, and report failures as one line."""
+    inherit()
     try:
         TaxiAgent(config).run()
     except SurgeError as exc:
-        log(config.index, f"error: {exc}")
+        log(config.index, str(exc), logging.ERROR)
         return 2
     except KeyboardInterrupt:
         return 130

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import socket
@@ -14,6 +15,8 @@ import zenoh
 from bus.certs import fleet_size
 from bus.session import SessionArgs, open_session
 from city.errors import ConfigError
+
+_logger = logging.getLogger(__name__)
 
 
 #: What the router logs unless ``RUST_LOG`` says otherwise: zenoh's warnings, among them each TLS handshake it
@@ -46,7 +49,7 @@ def router_main(bus: SessionArgs, announce: bool = False) -> None:
                        f"of {scope} (default deny)")
             else:
                 how = "INSECURE: no TLS, no access control"
-            print(f"zenoh router listening on {where}; {how}; Ctrl-C stops it", file=sys.stderr, flush=True)
+            _logger.info("zenoh router listening on %s; %s; Ctrl-C stops it", where, how)
         while not stop.wait(0.5):  # a timed wait: zenoh's threads may take the signal, and only this thread runs its handler
             pass
 

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import queue
-import sys
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +28,8 @@ from bus.access import access_control
 from bus.certs import check_credentials, fleet_size, identity
 from bus.wire import ENCODING
 from city.errors import ConfigError
+
+_logger = logging.getLogger(__name__)
 
 MODES = ("peer", "client", "router")
 
@@ -106,12 +108,12 @@ class SessionArgs:
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 #: The same on a secured bus.
 DEFAULT_TLS_ENDPOINT = "tls/127.0.0.1:7447"
-INSECURE_WARNING = "surge: warning: --insecure: the bus runs without TLS or access control; anyone who reaches it can steer the fleet"
+INSECURE_WARNING = "--insecure: the bus runs without TLS or access control; anyone who reaches it can steer the fleet"
 
 
 def warn_insecure() -> None:
-    """The one line an insecure run prints."""
-    print(INSECURE_WARNING, file=sys.stderr, flush=True)
+    """The one warning an insecure run gives."""
+    _logger.warning("%s", INSECURE_WARNING)
 
 
 @contextmanager

@@ -18,7 +18,7 @@ that the new one waits for.
 from __future__ import annotations
 
 import datetime as dt
-import sys
+import logging
 import time
 from collections.abc import Iterable
 from contextlib import ExitStack
@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 from bus.keys import Keys
 from city.errors import ConfigError, SurgeError
+
+_logger = logging.getLogger(__name__)
 
 #: Seconds a coordinator asks the router for the run's live coordinator tokens before it starts.
 LIVE_QUERY_S = 3.0
@@ -81,8 +83,8 @@ def claim(session, keys: Keys, stack: ExitStack, *, resume: bool, takeover: bool
                           f"unreachable rather than dead, --takeover fences it and takes the run over")
     token = session.liveliness().declare_token(keys.coordinator(epoch))
     stack.callback(token.undeclare)
-    print(f"surge coordinator: taking run {keys.run!r} over from the coordinator of run epoch {old} (since {epoch_time(old)}): "
-          f"its turns are dropped from now on; this one is epoch {epoch}", file=sys.stderr, flush=True)
+    _logger.warning("taking run %r over from the coordinator of run epoch %d (since %s): its turns are dropped from now on; "
+                    "this one is epoch %d", keys.run, old, epoch_time(old), epoch, extra={"who": "coordinator"})
     return Claim(epoch, True)
 
 

@@ -15,6 +15,7 @@ the two runs' decisions are compared.
 from __future__ import annotations
 
 import json
+import logging
 import socket
 import sys
 import tempfile
@@ -30,7 +31,10 @@ from bus.certs import fleet_size, make_certs, taxi_name
 from bus.router import free_tcp_port, router_main, wait_for_tcp
 from bus.session import SessionArgs
 from city.errors import ConfigError, SurgeError
+from city.logs import inherit
 from coordinator.run_config import FleetConfig
+
+_logger = logging.getLogger(__name__)
 
 
 def agent_context():
@@ -59,10 +63,11 @@ def _coordinator_entry(cfg: FleetConfig, bus: SessionArgs, result_path: str, run
     from coordinator.runtime import coordinator_main
 
     signal.signal(signal.SIGTERM, lambda signum, _: sys.exit(128 + signum))  # unwinds, so the run's stop goes out
+    inherit()
     try:
         coordinator_main(cfg, bus, result_path, run_dir=run_dir, resume=resume)
     except SurgeError as exc:
-        print(f"surge coordinator: error: {exc}", file=sys.stderr, flush=True)
+        _logger.error("%s", exc, extra={"who": "coordinator"})
         sys.exit(2)
     except KeyboardInterrupt:
         sys.exit(130)

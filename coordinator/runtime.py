@@ -36,8 +36,8 @@ handling one, ends the run.
 from __future__ import annotations
 
 import datetime as dt
+import logging
 import os
-import sys
 import time
 from contextlib import ExitStack
 from dataclasses import asdict
@@ -65,9 +65,12 @@ from coordinator.claim import TAKEOVER_WAIT_S, TakenOver, claim, epoch_time, tak
 from coordinator.faults import ACK_WAIT_S, RESEND_S, SETTLE_S, Health, PartitionError, agents_text
 from coordinator.metrics import Counted
 
+_logger = logging.getLogger(__name__)
 
-def log(message: str) -> None:
-    print(f"surge coordinator: {message}", file=sys.stderr, flush=True)
+
+def log(message: str, level: int = logging.INFO) -> None:
+    """A line of the coordinator: ``surge coordinator: …``."""
+    _logger.log(level, "%s", message, extra={"who": "coordinator"})
 
 
 class Coordinator:

@@ -18,6 +18,7 @@ dominating the loss of the standard network.
 from __future__ import annotations
 
 import datetime as dt
+import logging
 import time
 from dataclasses import dataclass
 
@@ -33,6 +34,8 @@ from predictor.features import (
     temporal_matrix,
     weather_matrix,
 )
+
+log = logging.getLogger(__name__)
 
 #: Months 1..TRAIN_MONTHS train, the next VAL_MONTHS validate, the rest test.
 TRAIN_MONTHS = 6
@@ -167,11 +170,8 @@ def build_year_data(world, featurizer: EventFeaturizer, *, lead: int = LEAD_HOUR
         "embedder": dict(getattr(featurizer.embedder, "stats", {})),
     }
     if verbose:
-        print(
-            f"data: {H} hours x {S} sectors, {len(events)} events -> {E} event sector-hours; "
-            f"features built in {timings['total_s']:.1f}s",
-            flush=True,
-        )
+        log.info("data: %d hours x %d sectors, %d events -> %d event sector-hours; features built in %.1fs",
+                 H, S, len(events), E, timings["total_s"])
     return YearData(
         year=year,
         n_sectors=S,

@@ -19,7 +19,8 @@ shards are compacted into one when they pile up.
 
 Texts are de-duplicated before embedding (reviews repeat across the events of a
 venue); a shard is written every few thousand texts, so an interrupted run
-keeps what it embedded, and progress is printed.
+keeps what it embedded, and progress is logged (at INFO when ``verbose``, else
+DEBUG) and counted in texts (:func:`city.logs.steps`, the CLI's bar).
 
 Fixed shapes
 ------------
@@ -41,6 +42,7 @@ from __future__ import annotations
 
 import hashlib
 import itertools
+import logging
 import os
 import re
 import sys
@@ -52,6 +54,9 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from city.errors import ConfigError
+from city.logs import steps
+
+log = logging.getLogger(__name__)
 
 DEFAULT_ENCODER = "all-MiniLM-L6-v2"
 _DEFAULT_ALIASES = {"", "default", "all-minilm-l6-v2", "sentence-transformers/all-minilm-l6-v2"}
@@ -301,12 +306,13 @@ class Embedder:
     def _embed_missing(self, todo: list[str], keys: list[bytes]) -> np.ndarray:
         """Encode ``todo`` shortest first in chunks, caching and reporting progress after each."""
         t0 = time.perf_counter()
-        if self.verbose:
-            print(f"embedding {len(todo)} new texts with {self.encoder} (batches of {BATCH_ROWS}) …", flush=True)
+        say = log.info if self.verbose else log.debug
+        say("embedding %d new texts with %s (batches of %d) …", len(todo), self.encoder, BATCH_ROWS)
         padded = self._padded_lengths(todo)
         # Sorted once for all chunks, so that only the last batch of each padded length has copies in it.
         order = sorted(range(len(todo)), key=padded.__getitem__)
         out = np.empty((len(todo), self.dim), dtype=np.float32)
+        bar = steps(len(todo), "text", "embed")
         for i in range(0, len(order), CHUNK):
             part = order[i : i + CHUNK]
             vecs = self._encode_fixed_shape([todo[j] for j in part], [padded[j] for j in part])
@@ -314,14 +320,15 @@ class Embedder:
                 self.cache.put([keys[j] for j in part], vecs)
             out[part] = vecs
             done = i + len(part)
-            if self.verbose and len(todo) > CHUNK:
+            bar.update(len(part))
+            if len(todo) > CHUNK:
                 el = time.perf_counter() - t0
-                print(f"  embedded {done}/{len(todo)} texts, {el:.0f}s ({done / max(el, 1e-9):.0f}/s)", flush=True)
+                say("  embedded %d/%d texts, %.0fs (%.0f/s)", done, len(todo), el, done / max(el, 1e-9))
+        bar.close()
         dt_s = time.perf_counter() - t0
         self.stats["embedded"] += len(todo)
         self.stats["embed_seconds"] += dt_s
-        if self.verbose:
-            print(f"embedded {len(todo)} texts in {dt_s:.1f}s ({len(todo) / max(dt_s, 1e-9):.0f}/s)", flush=True)
+        say("embedded %d texts in %.1fs (%.0f/s)", len(todo), dt_s, len(todo) / max(dt_s, 1e-9))
         return out
 
     def _padded_lengths(self, texts: list[str]) -> list[int]:

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import datetime as dt
 import hashlib
+import logging
 import time
 from dataclasses import dataclass
 from typing import Sequence
@@ -47,6 +48,8 @@ import numpy as np
 
 from city.calendar import holidays_for
 from predictor.spectral import GAMMA, N_CLUSTERS, Q_MAX, review_representation
+
+log = logging.getLogger(__name__)
 
 N_TEMPORAL = 24 + 7 + 2 + 1
 WEATHER_NAMES = ("temp_f", "precip_in", "wind_mph")
@@ -165,11 +168,8 @@ class EventFeaturizer:
             self._vectors[ev.event_id] = EventVectors(z=z, R=R, has_reviews=has)
         self.timings["cluster_s"] += time.perf_counter() - t0
         if self.verbose:
-            print(
-                f"event features: {len(todo)} events, {len(self._cluster_memo)} distinct review sets clustered "
-                f"(embed {self.timings['embed_s']:.1f}s, cluster {self.timings['cluster_s']:.1f}s)",
-                flush=True,
-            )
+            log.info("event features: %d events, %d distinct review sets clustered (embed %.1fs, cluster %.1fs)",
+                     len(todo), len(self._cluster_memo), self.timings["embed_s"], self.timings["cluster_s"])
 
     def vectors(self, ev) -> EventVectors:
         if ev.event_id not in self._vectors:

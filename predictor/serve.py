@@ -13,6 +13,7 @@ request gets an error reply naming the field, and the service keeps serving.
 from __future__ import annotations
 
 import datetime as dt
+import logging
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +25,9 @@ from bus.session import Inbox, SessionArgs, open_session
 from bus.wire import ENCODING, ForecastMsg, ForecastRequest, decode
 from city.errors import ConfigError, SurgeError
 from city.forecast import Forecast
+from city.logs import inherit
+
+_logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -38,8 +42,9 @@ class ServeConfig:
     model: str | None = None
 
 
-def log(message: str) -> None:
-    print(f"surge predictor: {message}", file=sys.stderr, flush=True)
+def log(message: str, level: int = logging.INFO) -> None:
+    """A line of the predictor service: ``surge predictor: …``."""
+    _logger.log(level, "%s", message, extra={"who": "predictor"})
 
 
 class ForecastService:
@@ -130,10 +135,11 @@ def _world_for_model(config: ServeConfig, world):
 
 def serve_main(config: ServeConfig, bus: SessionArgs) -> None:
     """Entry point of a spawned predictor process: serve, and report a failure to start as one line."""
+    inherit()
     try:
         ForecastService(config).run(bus)
     except SurgeError as exc:
-        log(f"error: {exc}")
+        log(str(exc), logging.ERROR)
         sys.exit(2)
     except KeyboardInterrupt:
         pass

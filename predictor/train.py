@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,7 +33,10 @@ import numpy as np
 import torch
 from torch import nn
 
+from city.logs import steps
 from predictor.nets import DemandMLP, build, configure_threads
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass
@@ -194,6 +197,7 @@ def fit(
     bs = cfg.batch_size
     t_total = sum(result.epoch_seconds)
     epoch = start
+    bar = steps(cfg.epochs - start, "epoch", f"train {name}")
     while epoch < cfg.epochs and not result.stopped_early:
         t0 = time.perf_counter()
         g = torch.Generator().manual_seed(cfg.seed * 1_000_003 + epoch)
@@ -245,6 +249,8 @@ def fit(
         if log:
             stop = "  (early stop)" if result.stopped_early else ""
             log(f"[{name}] epoch {epoch:3d}/{cfg.epochs}  train_loss {train_loss:.5f}{msg}  {dt_s:6.1f}s  (total {t_total:7.1f}s){stop}")
+        bar.update()
+    bar.close()
     net = net.to("cpu")
     if has_val and best_state is not None:
         net.load_state_dict(best_state)
@@ -287,4 +293,5 @@ def versions() -> dict:
 
 
 def log_line(msg: str) -> None:
-    print(msg, flush=True, file=sys.stdout)
+    """Training's progress and what it read, at INFO."""
+    logger.info("%s", msg)

@@ -21,6 +21,14 @@ def _isolated_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
     os.environ.setdefault("SURGE_CACHE", str(tmp_path_factory.mktemp("surge-cache")))
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _logging_as_the_cli_shows_it() -> None:
+    """surge's log lines on stderr at INFO, one line each, as under the ``surge`` command (tests read them with capsys)."""
+    from city.logs import setup
+
+    setup("INFO")
+
+
 def line_city(n: int = 5, two_way: bool = True, sectors: int = 1) -> City:
     """Nodes 0..n-1 on a line (a ring when one-way, so it stays strongly connected)."""
     u = list(range(n - 1))

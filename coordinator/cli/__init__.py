@@ -1,8 +1,10 @@
 """The ``surge`` command line: one module per subcommand, each with ``add_parser(sub)``.
 
 Every subcommand reports bad input as one line on stderr and exits with
-status 2; long work prints progress on stderr and results on stdout.
-argparse lives only in this package.
+status 2; long work shows progress on stderr (a bar with ETA on a terminal,
+one line per finished step otherwise: :mod:`coordinator.cli.terminal`) and
+results on stdout.  ``-q`` keeps warnings and errors only, ``-v`` adds debug
+messages.  argparse lives only in this package.
 """
 
 from __future__ import annotations
@@ -11,7 +13,6 @@ import argparse
 import os
 import signal
 import sys
-import warnings
 
 from city.errors import SurgeError
 from coordinator.cli.options import SurgeParser
@@ -43,10 +44,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _warn_one_line(message, category, filename, lineno, file=None, line=None) -> None:
-    print(f"surge: warning: {message}", file=sys.stderr)
-
-
 def _terminated(signum: int, frame: object) -> None:
     """SIGTERM unwinds like Ctrl-C: worker pools are stopped and finished results stay written."""
     print("surge: terminated", file=sys.stderr)
@@ -54,10 +51,13 @@ def _terminated(signum: int, frame: object) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    warnings.showwarning = _warn_one_line
+    from coordinator.cli.terminal import configure
+
     signal.signal(signal.SIGTERM, _terminated)
+    configure()  # warnings while parsing are one line too
     parser = build_parser()
     args = parser.parse_args(argv)
+    configure(quiet=getattr(args, "quiet", False), verbose=getattr(args, "verbose", False))
     if getattr(args, "share", None) is not None:
         from city.scenario import SHARE_ENV
 

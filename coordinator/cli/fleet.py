@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
-import sys
 import time
 from pathlib import Path
 
@@ -33,6 +33,8 @@ from coordinator.fleet import (
     run_local_fleet,
 )
 from coordinator.run_config import FleetConfig
+
+_logger = logging.getLogger(__name__)
 
 
 def fleet_args(p, *, taxis: int, minutes: int, samples: int | None) -> None:
@@ -154,11 +156,11 @@ def cmd_fleet(args) -> int:
     else:
         how = (f"secured: mutual TLS and access control, with the credentials in {args.certs}" if args.certs else
                "secured: mutual TLS and access control, with credentials made for this run")
-    print(f"starting {roles} and {cfg.taxis} agent processes on loopback, {how}", file=sys.stderr, flush=True)
+    _logger.info("starting %s and %d agent processes on loopback, %s", roles, cfg.taxis, how)
     result = run_local_fleet(cfg, secure=not args.insecure, certs=args.certs, run_dir=run_dir, resume=args.resume is not None,
                              agent_threads=args.threads, port=args.port)
     if args.check:
-        print("running the same instance in-process to compare decisions", file=sys.stderr, flush=True)
+        _logger.info("running the same instance in-process to compare decisions")
         ref = in_process(cfg)
         result["in_process"] = ref
         result["same_decisions"] = ref["decisions_sha256"] == result["decisions_sha256"]
@@ -238,7 +240,7 @@ def cmd_agents(args) -> int:
     ctx = agent_context()
     procs = [ctx.Process(target=agent_entry, args=(i, args.run, bus.as_identity(taxi_name(i)), args.join_timeout, args.data,
                                                     args.grace, args.threads), name=f"surge-agent-{i}") for i in ids]
-    print(f"starting {len(procs)} agent processes for run {args.run!r}", file=sys.stderr, flush=True)
+    _logger.info("starting %d agent processes for run %r", len(procs), args.run)
     for p in procs:
         p.start()
     try:
@@ -250,7 +252,7 @@ def cmd_agents(args) -> int:
                 p.terminate()
     failed = [i for i, p in zip(ids, procs) if p.exitcode != 0]
     if failed:
-        print(f"surge: agents {', '.join(map(str, failed))} exited with an error", file=sys.stderr)
+        _logger.error("agents %s exited with an error", ", ".join(map(str, failed)))
         return 1
     return 0
 

@@ -31,10 +31,19 @@ class DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 
 class SurgeParser(argparse.ArgumentParser):
-    """Every ``surge`` parser and subparser: defaults shown in ``--help``."""
+    """Every ``surge`` parser and subparser: defaults shown in ``--help``, and ``-q``/``-v`` before or after a command."""
 
     def __init__(self, *args, formatter_class: type = DefaultsFormatter, **kwargs) -> None:
         super().__init__(*args, formatter_class=formatter_class, **kwargs)
+        verbosity_args(self)
+
+
+def verbosity_args(p: argparse.ArgumentParser) -> None:
+    """``-q/--quiet`` and ``-v/--verbose``; unset unless given, so that a subcommand's parser keeps the top level's."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                   help="warnings and errors only: no progress lines or bars")
+    g.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="debug messages too")
 
 
 def forecast_name(text: str) -> str:

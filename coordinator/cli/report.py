@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
+import logging
 from pathlib import Path
 
 from city.errors import DataError, SurgeError
 from coordinator.cli.evaluate import print_results
+
+_logger = logging.getLogger(__name__)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -64,7 +66,7 @@ def _report(doc: dict, path: Path, args: argparse.Namespace) -> int:
         raise SurgeError(f"{path}: no seed is finished at every hour (use --all-seeds)")
     dropped = len(doc["episodes"]) - len(full["episodes"])
     if dropped:
-        print(f"left out {dropped} episodes of seeds not finished at every hour (--all-seeds keeps them)", file=sys.stderr)
+        _logger.warning("left out %d episodes of seeds not finished at every hour (--all-seeds keeps them)", dropped)
     out = print_results(full, policy=args.policy, plot_path=args.plot)
     if args.json:
         Path(args.json).write_text(json.dumps({"schema": "surge.report/1", "source": str(path), "seeds": sorted({e["seed"] for e in full["episodes"]}), **out}, indent=1))

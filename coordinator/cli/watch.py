@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import sys
+import logging
 
 from city.errors import ConfigError
+
+_logger = logging.getLogger(__name__)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -67,7 +69,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
         if feed.error is not None:
             raise ConfigError(feed.error)
         what = f"live: run {args.run!r} as a read-only observer"
-    print(f"surge watch: http://{host}:{port}/ ({what}); Ctrl-C stops it", file=sys.stderr, flush=True)
+    _logger.info("http://%s:%d/ (%s); Ctrl-C stops it", host, port, what, extra={"who": "watch"})
     config = uvicorn.Config(make_app(feed, what), host=host, port=port, log_level="warning", ws="websockets-sansio")
     try:
         uvicorn.Server(config).run()

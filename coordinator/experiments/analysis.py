@@ -15,6 +15,7 @@ import numpy as np
 
 from city.errors import ConfigError
 from coordinator.experiments.results import METRICS, ORACLES, instance_key
+from coordinator.experiments.tables import text_table
 
 BOOTSTRAP_RESAMPLES = 10_000
 
@@ -143,17 +144,15 @@ def format_comparison(rows: Iterable[dict]) -> str:
     rows = list(rows)
     if not rows:
         return ""
-    width = max([10] + [len(r["against"]) + 2 for r in rows])
-    head = f"{'hour':>4}  {'against':<{width}}{'wins':>10}{'cost diff':>12}{'95% CI':>20}{'overhead Δ':>12}{'served Δ':>10}"
     policy = rows[0]["policy"]
-    lines = [f"{policy} paired with each policy on the same instances (wins: lower total cost; CI: paired bootstrap)", head, "-" * len(head)]
-    for r in rows:
-        red = f"{-100 * r['overhead_reduction']:>+11.1f}%" if r["overhead_reduction"] is not None else f"{'—':>12}"
-        ci = f"[{r['ci95'][0]:+.1f}, {r['ci95'][1]:+.1f}]"
-        lines.append(
-            f"{r['hour']:>4}  {r['against']:<{width}}{r['wins']:>5} / {r['n']:<3}"
-            f"{r['cost_difference']:>+11.1f}{ci:>20}{red}{100 * r['served_change']:>+9.1f}%"
-        )
+    cells = [[str(r["hour"]), r["against"], f"{r['wins']} / {r['n']}", f"{r['cost_difference']:+.1f}",
+              f"[{r['ci95'][0]:+.1f}, {r['ci95'][1]:+.1f}]",
+              f"{-100 * r['overhead_reduction']:+.1f}%" if r["overhead_reduction"] is not None else "—",
+              f"{100 * r['served_change']:+.1f}%"] for r in rows]
+    columns = [("hour", "right"), ("against", "left"), ("wins", "right"), ("cost diff", "right"), ("95% CI", "right"),
+               ("overhead Δ", "right"), ("served Δ", "right")]
+    lines = [f"{policy} paired with each policy on the same instances (wins: lower total cost; CI: paired bootstrap)",
+             text_table(columns, cells)]
     per_hour = {r["hour"]: r for r in rows}.values()
     n = sum(r["n"] for r in per_hour)
     below = sum(r["below_oracle"] for r in per_hour)
@@ -167,24 +166,19 @@ def format_comparison(rows: Iterable[dict]) -> str:
 
 
 def format_table(summary: Iterable[dict]) -> str:
+    """Mean ± standard deviation of each metric per hour and policy; the gap closed between greedy and the oracles."""
     summary = list(summary)
-    width = max([12] + [len(r["policy"]) + 2 for r in summary])
-    head = (f"{'hour':>4}  {'policy':<{width}}{'total cost':>20}{'outstanding end':>18}{'served':>16}"
-            f"{'wait overhead/served':>22}{'plan ms/step':>14}{'gap closed':>12}{'(auction)':>11}")
-    lines = [head, "-" * len(head)]
-    for r in summary:
-        tc, oe, sv, wo, ps = (r[m] for m in METRICS)
-        gaps = "".join(f"{100 * r[g]:>{w}.1f}%" if r.get(g) is not None else f"{'—':>{w + 1}}"
-                       for g, w in (("gap_closed", 11), ("gap_closed_auction", 10)))
-        lines.append(
-            f"{r['hour']:>4}  {r['policy']:<{width}}"
-            f"{tc[0]:>11.1f} ± {tc[1]:<6.1f}"
-            f"{oe[0]:>9.1f} ± {oe[1]:<6.1f}"
-            f"{sv[0]:>8.1f} ± {sv[1]:<5.1f}"
-            f"{wo[0]:>13.2f} ± {wo[1]:<6.2f}"
-            f"{ps[0] * 1e3:>12.2f}" + gaps
-        )
-    return "\n".join(lines)
+    columns = [("hour", "right"), ("policy", "left"), ("total cost", "right"), ("outstanding end", "right"), ("served", "right"),
+               ("wait overhead/served", "right"), ("plan ms/step", "right"), ("gap closed", "right"), ("(auction)", "right")]
+    spread = {}
+    for metric, digits in zip(METRICS[:4], (1, 1, 1, 2)):
+        sds = [f"{r[metric][1]:.{digits}f}" for r in summary]
+        width = max(map(len, sds), default=0)
+        spread[metric] = [f"{r[metric][0]:.{digits}f} ± {sd:>{width}}" for r, sd in zip(summary, sds)]  # the ± signs line up
+    rows = [[str(r["hour"]), r["policy"], *(spread[m][k] for m in METRICS[:4]), f"{r[METRICS[4]][0] * 1e3:.2f}",
+             *(f"{100 * r[g]:.1f}%" if r.get(g) is not None else "—" for g in ("gap_closed", "gap_closed_auction"))]
+            for k, r in enumerate(summary)]
+    return text_table(columns, rows)
 
 
 def plot(summary: list[dict], path: str | Path, title: str = "", metric: str = "total_cost", ylabel: str = "total cost (request-minutes waited)") -> None:

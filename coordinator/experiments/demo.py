@@ -12,6 +12,7 @@ def surge_vs_greedy(cfg, fleet: dict, out: Path) -> list[str]:
     """
     from agents.base import make_policy
     from coordinator.experiments import figures
+    from coordinator.experiments.tables import text_table
 
     scen, requests, start, context = cfg.instance()
     city = scen.city
@@ -26,8 +27,8 @@ def surge_vs_greedy(cfg, fleet: dict, out: Path) -> list[str]:
     rows += [(f"{t.label} (in-process)", sum(t.cost), t.cost[-1], t.served) for t in tracks]
     n = len(requests)
     lines = [f"{cfg.taxis} taxis, {n} requests in {cfg.minutes} min from {cfg.date} {cfg.hour}:00 (same instance for every row)",
-             f"{'policy':<26}{'total cost':>12}{'outstanding end':>17}{'served':>14}", "-" * 69]
-    lines += [f"{label:<26}{cost:>12}{end:>17}{served:>8} ({100 * served / max(n, 1):.0f} %)" for label, cost, end, served in rows]
+             text_table([("policy", "left"), ("total cost", "right"), ("outstanding end", "right"), ("served", "right")],
+                        [[label, str(cost), str(end), f"{served} ({100 * served / max(n, 1):.0f} %)"] for label, cost, end, served in rows])]
     lines.append(note)
     g = sum(tracks[1].cost)
     lines.append(f"{cfg.policy} costs {100 * (sum(tracks[0].cost) - g) / max(g, 1):+.1f} % against greedy")

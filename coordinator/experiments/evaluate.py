@@ -38,8 +38,8 @@ import datetime as dt
 import hashlib
 import inspect
 import json
+import logging
 import signal
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -56,6 +56,7 @@ from city.episode import (
 )
 from city.errors import DataError
 from city.fingerprint import machine
+from city.logs import inherit, steps
 from city.sim import EpisodeResult
 from coordinator.experiments.results import (
     EPISODE_FIELDS,
@@ -75,6 +76,8 @@ from coordinator.experiments.results import (
     surge_defaults,
     write_json,
 )
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -138,8 +141,7 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
         policy = make_policy(name, scen.city, **options)
         t0 = time.perf_counter()
         results[label] = run_episode(scen.city, policy, requests, start, context)
-        print(f"  {date_text} hour {hour} seed {seed}: {label} {results[label].total_cost} ({time.perf_counter() - t0:.0f} s)",
-              file=sys.stderr, flush=True)
+        log.info("  %s hour %d seed %d: %s %d (%.0f s)", date_text, hour, seed, label, results[label].total_cost, time.perf_counter() - t0)
         if any(p not in results for p in runs_first):
             continue  # a row carries both oracles' costs and greedy's
         some = next(iter(known.values()), None)
@@ -260,7 +262,7 @@ def evaluate(
     not rerun.  ``borrow``, another results document, lends the rows it holds
     under the same settings (:func:`borrowable`) instead of running them again.
     """
-    progress = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
+    progress = progress or log.info
     scen = _scenario_cache(cfg)
     for label in dict.fromkeys(cfg.policies):  # fail on a bad name or option now, not in a worker an hour in
         name, options = parse_policy(label)
@@ -298,6 +300,8 @@ def evaluate(
     lent_rows = sum(len(lent.get(t, {})) for t in tasks)
     if lent_rows:
         progress(f"{lent_rows} rows of the {len(tasks)} instances to run are known already (same settings): they are not run again")
+    log.debug("%d instances to run (%d done), %s", len(tasks), len(done),
+              f"on the Dask cluster at {cfg.cluster}" if cfg.cluster else f"{cfg.jobs} worker process(es)")
     t0 = time.perf_counter()
 
     def document() -> dict:
@@ -327,9 +331,11 @@ def evaluate(
 
     if keep_to is not None:
         keep_to.mkdir(parents=True, exist_ok=True)
-    with contextlib.closing(run_instances(cfg, tasks, lent, keep_to)) as results:  # closed at once on any error: workers stop
+    with contextlib.closing(run_instances(cfg, tasks, lent, keep_to)) as results, \
+            steps(len(tasks), "instance", "evaluate") as bar:  # closed at once on any error: workers stop
         for k, rows in enumerate(results, 1):
             report(k, rows)
+            bar.update()
     if keep_to is not None:
         with contextlib.suppress(OSError):
             keep_to.rmdir()  # all finished; a file it still holds (another run's) keeps it
@@ -360,9 +366,9 @@ def run_instances(cfg: EvalConfig, tasks: list[tuple[str, int, int]], known: dic
         # A Pool, not a ProcessPoolExecutor: leaving the block for any reason (an error,
         # Ctrl-C, SIGTERM turned into SystemExit by the CLI) terminates the workers at once
         # instead of waiting for their instances or leaving them orphaned. Workers ignore
-        # SIGINT so that Ctrl-C reaches only this process, which then stops them.
+        # SIGINT so that Ctrl-C reaches only this process, which then stops them (_worker_init).
         try:
-            pool = mp.get_context("spawn").Pool(cfg.jobs, initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN))
+            pool = mp.get_context("spawn").Pool(cfg.jobs, initializer=_worker_init)
         finally:
             if previous is None:
                 del os.environ["NUMBA_NUM_THREADS"]
@@ -372,6 +378,12 @@ def run_instances(cfg: EvalConfig, tasks: list[tuple[str, int, int]], known: dic
         yield from map(_instance_task, work)
 
 
+
+
+def _worker_init() -> None:
+    """A pool worker: Ctrl-C reaches only the parent, which stops the pool; messages at the parent's level, one line each."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    inherit()
 
 
 def kept_episodes(cfg: EvalConfig, folder: Path, warn: Callable[[str], None]) -> dict[tuple[str, int, int], dict[str, dict]]:

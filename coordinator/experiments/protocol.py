@@ -6,11 +6,13 @@
 
 from __future__ import annotations
 
-import sys
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
 PAPER_DATE = "2022-11-17"
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -106,7 +108,7 @@ class Run:
     earlier: dict[str, float] = field(default_factory=dict)
 
     def say(self, msg: str) -> None:
-        print(f"reproduce: {msg}", file=sys.stderr, flush=True)
+        log.info("reproduce: %s", msg)
         self.log.append(msg)
 
     def summed(self) -> dict[str, float]:

@@ -39,6 +39,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from city.errors import ConfigError
+from city.logs import steps
 from coordinator.experiments.analysis import complete_seeds, plot, summarize
 from coordinator.experiments.protocol import (
     ABLATIONS,
@@ -252,13 +253,18 @@ def reproduce(run: Run, refresh_model: bool = False, report_only: bool = False) 
         docs, status = _interim_docs(run, _steps(run, evening_event_dates(scen.world, p.other_dates)))
     else:
         run.out.mkdir(parents=True, exist_ok=True)
-        _train(run)
-        _check_model(run, refresh_model)
-        pe = _predictor_eval(run)
         scen = load_scenario(run.scenario, run.data)
+        todo = _steps(run, evening_event_dates(scen.world, p.other_dates))
         docs = {}
-        for name, (dates, hours, seeds, labels) in _steps(run, evening_event_dates(scen.world, p.other_dates)).items():
-            docs[name] = _evaluate(run, name, dates, hours, seeds, labels, borrow=docs["main"] if name == "ablation" else None)
+        with steps(2 + len(todo), "step", "reproduce") as bar:
+            _train(run)
+            _check_model(run, refresh_model)
+            bar.update()
+            pe = _predictor_eval(run)
+            bar.update()
+            for name, (dates, hours, seeds, labels) in todo.items():
+                docs[name] = _evaluate(run, name, dates, hours, seeds, labels, borrow=docs["main"] if name == "ablation" else None)
+                bar.update()
     run.say("figures and REPORT.md" + (" (interim)" if status else ""))
     t0 = time.perf_counter()
     report = write_report(run, scen, docs, pe, paper_figures(run, scen, complete_seeds(docs["main"])), status)

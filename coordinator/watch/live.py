@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-import sys
+import logging
 import threading
 import time
 from dataclasses import dataclass
@@ -34,6 +34,8 @@ from bus.wire import (
 from city.errors import ConfigError, SurgeError
 from coordinator.watch.citymap import city_map
 from coordinator.watch.view import FleetView
+
+_logger = logging.getLogger(__name__)
 
 #: Seconds between two frames the feed renders, at most.
 FRAME_S = 0.1
@@ -90,7 +92,7 @@ class LiveFeed:
         except SurgeError as exc:
             self.error = str(exc)
             if self.ready.is_set():  # mid-run: the page keeps the last frame; the terminal says why it stopped
-                print(f"surge watch: error: {exc}", file=sys.stderr, flush=True)
+                _logger.error("%s", exc, extra={"who": "watch"})
         finally:
             if not self.ready.is_set():  # the page never comes: say why rather than leave the command waiting
                 self.error = self.error or "the bus thread stopped before the run's spec came (see the traceback above)"
@@ -158,7 +160,7 @@ class LiveFeed:
                 stop: Stop = decode(payload, Stop, key)  # type: ignore[assignment]
                 view.stop(stop.t, stop.reason)
         except SurgeError as exc:  # a message that fails its checks is dropped, as every surge process drops it
-            print(f"surge watch: dropped a message on {key}: {exc}", file=sys.stderr, flush=True)
+            _logger.warning("dropped a message on %s: %s", key, exc, extra={"who": "watch"})
 
     @staticmethod
     def _state(view: FleetView, s: State) -> bool:

@@ -150,7 +150,7 @@ def test_session_settings(capsys: pytest.CaptureFixture) -> None:
     p = argparse.ArgumentParser()
     add_session_args(p)
     assert session_args(p.parse_args(["--insecure"])).connect == [DEFAULT_ENDPOINT]
-    assert capsys.readouterr().err.strip() == INSECURE_WARNING
+    assert capsys.readouterr().err.strip() == f"surge: warning: {INSECURE_WARNING}"
     args = session_args(p.parse_args(["--insecure", "--mode", "peer", "-l", "tcp/127.0.0.1:7000"]))
     assert args.mode == "peer" and args.listen == ["tcp/127.0.0.1:7000"] and args.connect == []
     conf = args.zenoh_config()
