@@ -23,6 +23,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--regimes", nargs="+", default=None, metavar="RESULTS",
                    help="instead: surge against the strongest practical baseline per regime (map, hour, fleet size, start) "
                         "of these results files, and surge's other forecasts; --json and --plot write the table and a figure")
+    p.add_argument("--hours", type=int, nargs="+", default=None, help="with --regimes: these hours only (default: every hour)")
     p.add_argument("--results-page", action="store_true",
                    help="regenerate the results page from every benchmarks/<question>/page.toml instead (no RESULTS)")
     p.add_argument("--benchmarks", default="benchmarks", help="with --results-page: the benchmarks folder (default: benchmarks)")
@@ -46,7 +47,9 @@ def cmd_regimes(args: argparse.Namespace) -> int:
     from coordinator.experiments.regimes import format_regimes, plot_regimes, regime_rows
     from coordinator.experiments.results import read_results, write_json
 
-    docs = [read_results(f) for f in args.regimes]
+    from coordinator.experiments.analysis import select
+
+    docs = [select(read_results(f), hours=args.hours) for f in args.regimes]
     rows = regime_rows(docs, policy=args.policy or "surge")
     if not rows:
         raise SurgeError("surge report --regimes: no regime has a seed finished at every hour with surge and a practical baseline")

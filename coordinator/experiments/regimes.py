@@ -20,6 +20,7 @@ import numpy as np
 from agents.base import split_policy
 from coordinator.experiments.analysis import compare_pair, complete_seeds, summarize
 from coordinator.experiments.practice import against_practice, forecast_of
+from coordinator.experiments.results_page import Section, fmt, renderer, table
 
 
 def forecast_labels(doc: dict, policy: str) -> dict[str, str]:
@@ -62,7 +63,7 @@ def regime_rows(docs: list[dict], policy: str = "surge") -> list[dict]:
                 "strongest": r["strongest"], "strongest_mean_cost": r["candidates"][r["strongest"]],
                 "policy_mean_cost": means[mine], "cost_difference": r["cost_difference"], "ci95": r["ci95"],
                 "wins": r["wins"], "n": r["n"], "beats": r["beats"],
-                "gap_closed": {p: gap.get((h, p)) for p in (policy, r["strongest"])},
+                "gap_closed": {"policy": gap.get((h, policy)), "strongest": gap.get((h, r["strongest"]))},
                 "forecast": mine, "forecast_mean_cost": means, "forecast_differences": diffs,
             })
     return sorted(rows, key=lambda r: (r["scenario"], r["warm_start"], r["hour"], r["taxis"]))
@@ -74,7 +75,7 @@ def _ci(r: dict) -> str:
 
 def _gap(r: dict) -> str:
     """The gap closed by the policy / by the strongest baseline, in percent."""
-    return " / ".join("—" if r["gap_closed"][p] is None else f"{100 * r['gap_closed'][p]:.0f}%" for p in (r["policy"], r["strongest"]))
+    return " / ".join("—" if r["gap_closed"][p] is None else f"{100 * r['gap_closed'][p]:.0f}%" for p in ("policy", "strongest"))
 
 
 def format_regimes(rows: list[dict]) -> str:
@@ -134,3 +135,23 @@ def _errorbars(ax, pts: list[dict], label: str, k: int, marker: str = "o") -> No
     y = np.array([p["cost_difference"] for p in pts])
     err = np.abs(np.array([p["ci95"] for p in pts]).T - y)
     ax.errorbar(x, y, yerr=err, marker=marker, capsize=3, label=label)
+
+
+@renderer("regimes")
+def render_regimes(sec: Section) -> list[str]:
+    """The results page's table of ``surge report --regimes`` JSON files: one row per regime, a column per other forecast."""
+    rows = [r for f in sec.need("files") if f.endswith(".json") for r in sec.load(f)["regimes"]]
+    forecasts = list(dict.fromkeys(d["forecast"] for r in rows for d in r["forecast_differences"]))
+    base = rows[0]["forecast"] if rows else ""
+    out = []
+    for r in rows:
+        by = {d["forecast"]: d for d in r["forecast_differences"]}
+        gap = " / ".join(fmt(None if r["gap_closed"][k] is None else 100 * r["gap_closed"][k], "{:.0f} %") for k in ("policy", "strongest"))
+        out.append([r["scenario"], "warm" if r["warm_start"] else "cold", f"{r['hour']} h", str(r["taxis"]), str(r["n"]),
+                    f"`{r['strongest']}`", fmt(r["cost_difference"], "{:+.1f}") + " " + fmt(r["ci95"], "{:+.1f}"),
+                    f"{r['wins']} / {r['n']}", fmt(r["beats"]), gap,
+                    *(fmt(by[f]["cost_difference"], "{:+.1f}") + " " + fmt(by[f]["ci95"], "{:+.1f}") + f", {by[f]['wins']} / {by[f]['n']}"
+                      if f in by else "—" for f in forecasts)])
+    head = ["map", "start", "hour", "taxis", "instances", "strongest baseline", "`surge` − it, 95 % CI", "`surge` wins", "beats it",
+            "gap closed: `surge` / it", *(f"`surge` {f} − {base}, 95 % CI, wins" for f in forecasts)]
+    return table(head, out)
