@@ -41,6 +41,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", default=None, help="write surge.results/1 JSON here, updated after every instance")
     p.add_argument("--plot", default=None, help="write a PNG bar chart of total cost per hour and policy here")
     p.add_argument("--resume", action="store_true", help="keep the instances already in --json and run only the rest")
+    p.add_argument("--warm-start", action="store_true",
+                   help="each policy starts where it left the fleet after driving the previous hour from the seed's random start "
+                        "(busy taxis at their drop-off, free; the previous hour's waiting requests dropped)")
+    p.add_argument("--borrow", default=None, metavar="RESULTS",
+                   help="a results file whose rows of the same settings (fleet, start, options, demand) are kept instead of run again")
     p.set_defaults(func=cmd_evaluate)
 
 
@@ -70,8 +75,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         world_seed=args.world_seed,
         jobs=args.jobs,
         cluster=args.cluster,
+        warm_start=args.warm_start,
     )
-    doc = evaluate(cfg, checkpoint=args.json, resume=args.resume)
+    lend = None
+    if args.borrow:
+        from coordinator.experiments.results import read_results
+
+        lend = read_results(args.borrow)
+    doc = evaluate(cfg, checkpoint=args.json, resume=args.resume, borrow=lend)
     if args.json:
         print(f"wrote {args.json}")
     print_results(doc, plot_path=args.plot)
@@ -94,6 +105,7 @@ def print_results(doc: dict, *, policy: str | None = None, plot_path: str | None
     seeds = sorted({e["seed"] for e in doc["episodes"]})
     print(f"{doc['scenario']}: {c['intersections']} intersections, {c['streets']} streets, {c['sectors']} sectors; "
           f"{cfg['taxis']} taxis, {cfg['minutes']} min, {len(seeds)} seeds, dates {' '.join(cfg['dates'])}; "
+          f"{'warm start (each policy from its own previous hour)' if doc.get('warm_start') else 'cold start (random positions)'}; "
           f"wait overhead measured against {doc['reference_oracle']}")
     summary = summarize(doc)
     print(format_table(summary))

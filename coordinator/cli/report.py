@@ -22,6 +22,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="keep a seed finished at some hours only (default: seeds finished at every hour)")
     p.add_argument("--json", default=None, help="write the summary and comparison as JSON here")
     p.add_argument("--plot", default=None, help="write a PNG bar chart of total cost per hour and policy here")
+    p.add_argument("--regimes", nargs="+", default=None, metavar="RESULTS",
+                   help="instead: surge against the strongest practical baseline per regime (map, hour, fleet size, start) "
+                        "of these results files, and surge's other forecasts; --json and --plot write the table and a figure")
+    p.add_argument("--hours", type=int, nargs="+", default=None, help="with --regimes: these hours only (default: every hour)")
     p.add_argument("--results-page", action="store_true",
                    help="regenerate the results page from every benchmarks/<question>/page.toml instead (no RESULTS)")
     p.add_argument("--benchmarks", default="benchmarks", help="with --results-page: the benchmarks folder (default: benchmarks)")
@@ -39,7 +43,37 @@ def cmd_results_page(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_regimes(args: argparse.Namespace) -> int:
+    import datetime as dt
+
+    from coordinator.experiments.regimes import format_regimes, plot_regimes, regime_rows
+    from coordinator.experiments.results import read_results, write_json
+
+    from coordinator.experiments.analysis import select
+
+    docs = [select(read_results(f), hours=args.hours) for f in args.regimes]
+    rows = regime_rows(docs, policy=args.policy or "surge")
+    if not rows:
+        raise SurgeError("surge report --regimes: no regime has a seed finished at every hour with surge and a practical baseline")
+    print(format_regimes(rows))
+    if args.json:
+        machines = sorted({e["machine"] for d in docs for e in d["episodes"] if e.get("machine")})
+        write_json({"schema": "surge.regimes/1", "command": "surge " + " ".join(sys.argv[1:]), "date": dt.date.today().isoformat(),
+                    "machine": ", ".join(machines), "sources": list(args.regimes),
+                    "surge_defaults": [json.loads(Path(f).read_text()).get("surge_defaults") for f in args.regimes],
+                    "regimes": rows}, args.json)
+        print(f"wrote {args.json}")
+    if args.plot:
+        plot_regimes(rows, args.plot)
+        print(f"wrote {args.plot}")
+    return 0
+
+
 def cmd_report(args: argparse.Namespace) -> int:
+    if args.regimes:
+        if args.results or args.results_page:
+            raise SurgeError("surge report: give --regimes, a results file or --results-page, one of them")
+        return cmd_regimes(args)
     if args.results_page:
         if args.results:
             raise SurgeError("surge report: give a results file or --results-page, not both")

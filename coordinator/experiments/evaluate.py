@@ -57,7 +57,9 @@ from city.episode import (
 from city.errors import DataError
 from city.fingerprint import machine
 from city.logs import inherit, steps
+from city.scenario import scenario_spec
 from city.sim import EpisodeResult
+from coordinator.experiments.warm_start import warm_start_positions, warm_up_hour
 from coordinator.experiments.results import (
     EPISODE_FIELDS,
     ORACLES,
@@ -94,6 +96,8 @@ class EvalConfig:
     world_seed: int = 0
     jobs: int = 1
     cluster: str | None = None
+    #: Each policy starts where its own previous hour left the fleet (:mod:`coordinator.experiments.warm_start`).
+    warm_start: bool = False
 
 
 def instance_seed(date: str | dt.date, hour: int, seed: int) -> int:
@@ -134,13 +138,14 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
         return known[label]["total_cost"] if label in known else results[label].total_cost
 
     for label in labels:
-        name, options = parse_policy(label)
-        options = {**cfg.policy_options.get(label, {}), **options}
-        if "seed" not in options and takes_rollout_seed(name):
-            options["seed"] = instance_seed(date, hour, seed)
-        policy = make_policy(name, scen.city, **options)
         t0 = time.perf_counter()
-        results[label] = run_episode(scen.city, policy, requests, start, context)
+        begin = start
+        if cfg.warm_start:
+            wdate = warm_up_hour(date, hour)[0]
+            begin = warm_start_positions(scen.city, _scenario_cache(cfg, wdate.year).world,
+                                         lambda d, h, label=label: _policy(cfg, label, scen.city, d, h, seed),
+                                         date, hour, cfg.taxis, seed)
+        results[label] = run_episode(scen.city, _policy(cfg, label, scen.city, date, hour, seed), requests, begin, context)
         log.info("  %s hour %d seed %d: %s %d (%.0f s)", date_text, hour, seed, label, results[label].total_cost, time.perf_counter() - t0)
         if any(p not in results for p in runs_first):
             continue  # a row carries both oracles' costs and greedy's
@@ -154,6 +159,15 @@ def _instance(cfg: EvalConfig, date_text: str, hour: int, seed: int, known: dict
                             "demand_source": demand_source(_scenario_cache(cfg).world), "row": known[done]},
                            Path(keep_to) / episode_file(date_text, hour, seed, done))
     return [dict(known[name]) for name in cfg.policies]
+
+
+def _policy(cfg: EvalConfig, label: str, city: object, date: dt.date, hour: int, seed: int) -> object:
+    """The policy of ``label`` with the run's options, its rollout seed drawn from the instance unless the label fixes one."""
+    name, options = parse_policy(label)
+    options = {**cfg.policy_options.get(label, {}), **options}
+    if "seed" not in options and takes_rollout_seed(name):
+        options["seed"] = instance_seed(date, hour, seed)
+    return make_policy(name, city, **options)
 
 
 def _row(date_text: str, hour: int, seed: int, name: str, r: EpisodeResult, oracle_cost: int, auction_cost: int,
@@ -189,12 +203,16 @@ def borrowable(cfg: EvalConfig, doc: dict) -> dict[tuple[str, int, int], dict[st
     """Rows of the results document ``doc`` that ``cfg`` would compute identically, by instance and policy label.
 
     Episodes are deterministic in (instance, label, options), so a row can be
-    reused when the scenario, fleet, episode length and world are the same,
+    reused when the scenario, fleet, episode length, start rule and world are the same,
     the label's options are the same, and so are both oracles' (every row
     carries their costs).  Nothing is borrowed otherwise.
     """
     theirs = doc["config"]
-    if any(getattr(cfg, k) != theirs.get(k) for k in _SAME_EPISODES):
+    if any(getattr(cfg, k) != theirs.get(k) for k in _SAME_EPISODES if k != "data_dir"):
+        return {}
+    if cfg.data_dir != theirs.get("data_dir") and scenario_spec(cfg.scenario, cfg.data_dir, validate=False) is not None:
+        return {}  # the synthetic city reads no data: its rows do not depend on --data
+    if cfg.warm_start != bool(theirs.get("warm_start", False)):
         return {}
     if not same_demand(recorded_source(doc), demand_source(_scenario_cache(cfg).world)):
         return {}
@@ -234,6 +252,11 @@ def load_finished(cfg: EvalConfig, path: str | Path) -> list[dict]:
     theirs = {k: v for k, v in doc.get("config", {}).items() if k not in _RESUME_FREE}
     if doc.get("reference_oracle") != "oracle":
         raise DataError("was written when 'oracle' was the auction; use another --json", path=path)
+    if cfg.warm_start != bool(theirs.get("warm_start", False)):
+        kinds = {True: "warm-start", False: "cold-start"}
+        raise DataError(f"holds {kinds[not cfg.warm_start]} results, this run is {kinds[cfg.warm_start]}; "
+                        "they do not mix: use another --json", path=path)
+    theirs["warm_start"] = cfg.warm_start
     ours = demand_source(_scenario_cache(cfg).world)
     if not same_demand(recorded_source(doc), ours):
         raise DataError(f"was written with demand source {recorded_source(doc)!r}, this run has {ours!r}; use another --json", path=path)
@@ -310,6 +333,7 @@ def evaluate(
             "schema": RESULTS_SCHEMA,
             "scenario": cfg.scenario,
             "reference_oracle": "oracle",
+            "warm_start": cfg.warm_start,
             "surge_defaults": surge_defaults(),
             "demand_source": demand_source(scen.world),
             "city": scen.city.summary(),
