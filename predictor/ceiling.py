@@ -290,16 +290,18 @@ def measure(model, world, data: YearData, featurizer, *, n_boot: int = 1000, see
     result["drivers"] = list(DRIVERS)
     result["features"] = list(FEATURES)
     pooled = result["pooled"]
-    result["rows"] = [{"key": k, "label": label, **pooled["rows"][k], **({"vs_rate": pooled["rows_vs_rate"][k]} if k in pooled.get("rows_vs_rate", {}) else {})}
-                      for k, label in ROWS if k in pooled["rows"]]
+    vs_rate = pooled.get("rows_vs_rate", {})
+    result["rows"] = [{"key": k, "label": label, **pooled["rows"][k],
+                       **{f"{f}_vs_rate": vs_rate.get(k, {}).get(f) for f in pooled["rows"][k]}} for k, label in ROWS if k in pooled["rows"]]
     return result
 
 
 def format_table(result: dict) -> str:
     """The terminal tables: PE [CI], minus metadata [CI], share of the ceiling [CI], pooled over the event sector-hours."""
     out = []
-    for title, sub in (("PE against the realised counts", None), ("error against the world's expected rate λ", "vs_rate")):
-        rows = [(r["label"], r[sub] if sub else r) for r in result["rows"] if sub is None or sub in r]
+    for title, suffix in (("PE against the realised counts", ""), ("error against the world's expected rate λ", "_vs_rate")):
+        rows = [(r["label"], {f: r[f + suffix] for f in ("pe", "ci", "minus_metadata", "minus_metadata_ci", "share_of_ceiling", "share_of_ceiling_ci")})
+                for r in result["rows"] if r.get("pe" + suffix) is not None]
         if not rows:
             continue
         out += [f"{title}, test months' event sector-hours, {result['pooled']['hours']} h (n = {result['pooled']['n']})",

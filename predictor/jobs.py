@@ -203,8 +203,8 @@ def text_ceiling(job: CeilingJob) -> dict:
     model = DemandModel.load(job.model)
     world, _ = world_for_model(model.meta, job.model, job.data)
     lead, lag = model.window
-    featurizer = model.featurizer(job.cache)
-    data = build_year_data(world, featurizer, lead=lead, lag=lag, verbose=False)
+    featurizer = model.featurizer(job.cache, verbose=True)
+    data = build_year_data(world, featurizer, lead=lead, lag=lag, verbose=True)
     result = {"question": "How much of what the event text could add does the event network, or a simpler reader, reach?",
               "command": job.command(), "date": dt.date.today().isoformat(), "machine": f"{os.cpu_count()}-vCPU {platform.machine()}",
               "scenario": model.meta.get("scenario") or {}, "model": str(Path(job.model)),
