@@ -103,7 +103,7 @@ def predictions(model, data: YearData, part: str = "test") -> dict[str, np.ndarr
     return out
 
 
-def _bootstrap_weights(n_days: int, n_boot: int, seed: int) -> np.ndarray:
+def bootstrap_weights(n_days: int, n_boot: int, seed: int) -> np.ndarray:
     """``(n_boot, n_days)`` multiplicities of each day in each resample."""
     rng = np.random.default_rng([seed, 2024])
     return rng.multinomial(n_days, np.full(n_days, 1.0 / n_days), size=n_boot).astype(np.float64)
@@ -120,7 +120,7 @@ def _per_sector_metric(err: np.ndarray, ok: np.ndarray, W: np.ndarray | None) ->
     return np.where(valid > 0, np.nansum(per, axis=1) / np.maximum(valid, 1), np.nan)
 
 
-def _pooled_metric(err: np.ndarray, ok: np.ndarray, W: np.ndarray | None) -> np.ndarray:
+def pooled_metric(err: np.ndarray, ok: np.ndarray, W: np.ndarray | None) -> np.ndarray:
     e, k = err.sum(axis=1), ok.sum(axis=1)
     if W is None:
         W = np.ones((1, err.shape[0]))
@@ -129,7 +129,7 @@ def _pooled_metric(err: np.ndarray, ok: np.ndarray, W: np.ndarray | None) -> np.
         return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
 
 
-def _ci(samples: np.ndarray) -> list[float]:
+def percentile_ci(samples: np.ndarray) -> list[float]:
     s = samples[np.isfinite(samples)]
     if not len(s):
         return [float("nan"), float("nan")]
@@ -149,13 +149,13 @@ def _rows(y: np.ndarray, preds: dict[str, np.ndarray], mask: np.ndarray, metric,
         e2, k2 = err.sum(axis=1), ok.sum(axis=1).astype(np.float64)
         row[f"pe_{name}"] = float(metric(e2, k2, None)[0])
         boots[name] = metric(e2, k2, W)
-        row[f"ci_{name}"] = _ci(boots[name])
+        row[f"ci_{name}"] = percentile_ci(boots[name])
     if "event_nn" in boots:
         for name in boots:
             if name == "event_nn":
                 continue
             d = boots["event_nn"] - boots[name]
-            row[f"diff_{name}"] = {"mean": float(row["pe_event_nn"] - row[f"pe_{name}"]), "ci": _ci(d), "share_event_nn_lower": float(np.mean(d[np.isfinite(d)] < 0)) if np.isfinite(d).any() else float("nan")}
+            row[f"diff_{name}"] = {"mean": float(row["pe_event_nn"] - row[f"pe_{name}"]), "ci": percentile_ci(d), "share_event_nn_lower": float(np.mean(d[np.isfinite(d)] < 0)) if np.isfinite(d).any() else float("nan")}
     return row
 
 
@@ -170,7 +170,7 @@ def evaluate(model, data: YearData, hours=HOURS, *, part: str = "test", n_boot: 
     y = data.counts[H0:H].reshape(D, 24, S).astype(np.float64)
     has = data.has_event()[H0:H].reshape(D, 24, S)
     P = {k: v.reshape(D, 24, S) for k, v in preds.items()}
-    W = _bootstrap_weights(D, n_boot, seed)
+    W = bootstrap_weights(D, n_boot, seed)
     everywhere = np.ones_like(has)
 
     def at(hrs):
@@ -181,11 +181,11 @@ def evaluate(model, data: YearData, hours=HOURS, *, part: str = "test", n_boot: 
     for hr in hours:
         yy, pp = at([hr])
         rows.append(_rows(yy, pp, everywhere[:, [hr]], _per_sector_metric, W, hr))
-        ev_rows.append(_rows(yy, pp, has[:, [hr]], _pooled_metric, W, hr))
+        ev_rows.append(_rows(yy, pp, has[:, [hr]], pooled_metric, W, hr))
     yy, pp = at(hours)
     pooled = {
         "all_sector_hours": _rows(yy, pp, everywhere[:, list(hours)], _per_sector_metric, W, f"{hours[0]}-{hours[-1]}"),
-        "event_sector_hours": _rows(yy, pp, has[:, list(hours)], _pooled_metric, W, f"{hours[0]}-{hours[-1]}"),
+        "event_sector_hours": _rows(yy, pp, has[:, list(hours)], pooled_metric, W, f"{hours[0]}-{hours[-1]}"),
     }
     return {
         "schema": SCHEMA,

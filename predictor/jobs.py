@@ -160,3 +160,58 @@ def evaluate_model(job: EvalJob) -> dict:
         plot(result, job.plot, title=f"Demand prediction PE, {sc['name']}, {months} {data.year}")
         print(f"wrote {job.plot}")
     return result
+
+
+@dataclass(frozen=True)
+class CeilingJob:
+    """What ``surge predictor ceiling`` measures: a trained model's text against the ceiling of its world's drivers."""
+
+    model: str
+    json: str | None = None
+    data: str | None = None
+    cache: str | None = None
+    bootstrap: int = 1000
+    seed: int = 0
+
+    def check(self) -> None:
+        if self.bootstrap < 1:
+            raise ConfigError("--bootstrap must be >= 1")
+
+    def command(self) -> str:
+        parts = ["surge predictor ceiling", "--model", self.model]
+        parts += ["--json", self.json] if self.json else []
+        parts += ["--data", self.data] if self.data else []
+        parts += ["--bootstrap", str(self.bootstrap)] if self.bootstrap != 1000 else []
+        parts += ["--seed", str(self.seed)] if self.seed else []
+        return " ".join(parts)
+
+
+def text_ceiling(job: CeilingJob) -> dict:
+    """Train the ceiling and text-reader networks beside a trained model, score all on the test months, print and write the table."""
+    import datetime as dt
+    import json
+    import os
+    import platform
+
+    from predictor.ceiling import format_table, measure
+    from predictor.dataset import build_year_data
+    from predictor.inputs import world_for_model
+    from predictor.model import DemandModel
+    from predictor.train import log_line
+
+    job.check()
+    model = DemandModel.load(job.model)
+    world, _ = world_for_model(model.meta, job.model, job.data)
+    lead, lag = model.window
+    featurizer = model.featurizer(job.cache, verbose=True)
+    data = build_year_data(world, featurizer, lead=lead, lag=lag, verbose=True)
+    result = {"question": "How much of what the event text could add does the event network, or a simpler reader, reach?",
+              "command": job.command(), "date": dt.date.today().isoformat(), "machine": f"{os.cpu_count()}-vCPU {platform.machine()}",
+              "scenario": model.meta.get("scenario") or {}, "model": str(Path(job.model)),
+              **measure(model, world, data, featurizer, n_boot=job.bootstrap, seed=job.seed, log=log_line)}
+    print(format_table(result))
+    if job.json:
+        Path(job.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(job.json).write_text(json.dumps(result, indent=1) + "\n")
+        print(f"wrote {job.json}")
+    return result

@@ -33,7 +33,7 @@ from city.demand.geography import (
 from city.demand.profile import FLEET_SHARE, TILT, base_rate, profile_base_rate
 from city.demand.real_level import BASE_FLOOR, day_kinds, default_share, real_base, sector_split
 from city.demand.naming import NEW_YORK, Naming
-from city.demand.venues import make_venues, schedule
+from city.demand.venues import EventSpec, make_venues, schedule
 from city.demand.world import DemandWorld, HourTrips, check_seed_year
 from city.errors import ConfigError
 from city.graph import City
@@ -53,8 +53,10 @@ class SyntheticWorld(DemandWorld):
     convention centre and festival park), ``intensity`` (each sector's share
     of base demand), ``demand_scale``, ``share`` (of a zone profile's real
     counts, or of the real hourly totals), ``base_source`` (what the base
-    demand is made of, in words) and ``demand_source`` (the same, recorded
-    in results files).
+    demand is made of, in words), ``demand_source`` (the same, recorded
+    in results files) and ``event_specs`` (by event id, the
+    :class:`~city.demand.venues.EventSpec` its text and attendance were
+    drawn from: the announced attendance drivers, as the world records them).
 
     Parameters
     ----------
@@ -135,6 +137,7 @@ class SyntheticWorld(DemandWorld):
         events, attendance = draw_attendance(specs, events, venues, weather, seed)
         super().__init__(city, year, seed, venues, events, weather, counts, pois, notes, holidays=holidays, schedules=schedules)
         self._real_totals: np.ndarray | None = None
+        self.event_specs: dict[str, EventSpec] = {e.event_id: s for e, s in zip(events, specs)}
         self.hourly_totals_source = None if hourly_totals is None else hourly_totals.source
 
         S = city.n_sectors

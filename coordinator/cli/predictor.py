@@ -46,6 +46,16 @@ def add_parser(subparsers) -> None:
     e.add_argument("--part", choices=("test", "val"), default="test", help="months to score: test (Sep-Dec, the figures) or val (Jul-Aug, for design choices)")
     e.set_defaults(func=eval_main)
 
+    c = sub.add_parser("ceiling", help="how much can the event text tell: the metadata network plus the world's announced attendance "
+                       "drivers (the ceiling), a ridge reader of the text, and the event network, on the test months with 95%% CIs")
+    c.add_argument("--model", type=model_dir, required=True, help="trained model directory (synthetic world, with its ablation networks)")
+    c.add_argument("--json", default=None, help="write results as JSON here")
+    c.add_argument("--data", default=None, help="override the data directory recorded in the model")
+    c.add_argument("--cache", default=None, help="embedding cache root")
+    c.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples of test days for the 95%% intervals")
+    c.add_argument("--seed", type=int, default=0, help="seed of the bootstrap and of the reader's folds")
+    c.set_defaults(func=ceiling_main)
+
     from coordinator.cli.options import add_session_args
 
     v = sub.add_parser("serve", help="answer a distributed run's forecast queries on the bus (torch stays in this process)")
@@ -105,4 +115,11 @@ def eval_main(args) -> int:
     from predictor.jobs import EvalJob, evaluate_model
 
     evaluate_model(EvalJob(**{f: getattr(args, f) for f in EvalJob.__dataclass_fields__}))
+    return 0
+
+
+def ceiling_main(args) -> int:
+    from predictor.jobs import CeilingJob, text_ceiling
+
+    text_ceiling(CeilingJob(**{f: getattr(args, f) for f in CeilingJob.__dataclass_fields__}))
     return 0
