@@ -209,7 +209,9 @@ def _plan_child(cfg: PlanBench, label: str) -> dict:
 
     from agents.base import make_policy, parse_policy
     from agents.waves import plan_waves
+    from city.logs import inherit
 
+    inherit()  # the parent's log level and one-line warnings, in this spawned process too
     if cfg.threads:
         numba.set_num_threads(cfg.threads)
     scen, sim, episode = plan_state(cfg.scenario, cfg.data, dt.date.fromisoformat(cfg.date), cfg.hour, cfg.taxis,

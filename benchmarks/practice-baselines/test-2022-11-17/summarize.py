@@ -14,7 +14,7 @@ from coordinator.experiments.evaluate import read_results, write_json
 from coordinator.experiments.practice import against_practice
 
 HERE = Path(__file__).parent
-PAIRS = (("surge", "rebalance"), ("surge", "match"), ("surge", "ia"), ("rebalance", "match"), ("match", "ia"))
+PAIRS = (("surge", "rebalance"), ("surge", "match"), ("surge:base=rebalance,scope=map", "rebalance"), ("surge:base=rebalance,scope=map", "surge"), ("surge", "ia"), ("rebalance", "match"), ("match", "ia"))
 
 
 def main() -> None:
@@ -27,7 +27,7 @@ def main() -> None:
         doc = complete_seeds(read_results(path))
         seeds = sorted({e["seed"] for e in doc["episodes"]})
         pairs = [compare_pair(doc, a, b, h) for a, b in PAIRS for h in (17, 19)]
-        gap = {f"{r['hour']} {r['policy']}": r["gap_closed"] for r in summarize(doc) if r["policy"] in ("surge", "rebalance", "match")}
+        gap = {f"{r['hour']} {r['policy']}": r["gap_closed"] for r in summarize(doc) if r["policy"] in ("surge", "rebalance", "match", "surge:base=rebalance,scope=map")}
         cpu = {p: 1e3 * sum(e["plan_cpu_seconds_per_step"] for e in doc["episodes"] if e["policy"] == p)
                / sum(1 for e in doc["episodes"] if e["policy"] == p) for p in dict.fromkeys(e["policy"] for e in doc["episodes"])}
         out["maps"][m] = {"seeds": seeds, "pairs": [p for p in pairs if p], "verdicts": against_practice(doc, "surge"),
