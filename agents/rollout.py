@@ -75,7 +75,6 @@ from agents.demand_tables import DemandTables
 from agents.greedy import greedy_controls
 from agents.ia import ia_controls
 from agents.place_values import place_values
-from agents.rebalance import rebalance_plan, sector_anchors
 from agents.rollout_config import BASES, CE_MODES, NEAR_K, RolloutConfig
 from agents.shortcuts import MINUTE_NEAR_K, PlanStats, Shortcuts, transposed
 from city.errors import ConfigError
@@ -139,6 +138,10 @@ class HourInputs:
 
     @classmethod
     def of(cls, city: City, forecast: Forecast) -> HourInputs:
+        # Imported here: scipy's assignment solver is for the rebalance base alone, and an agent of another base
+        # joins a run without it.
+        from agents.rebalance import sector_anchors
+
         return cls(eta=np.asarray(forecast.eta, dtype=np.float64), anchors=sector_anchors(city, forecast.rho))
 
 
@@ -150,6 +153,8 @@ def base_controls(city: City, config: RolloutConfig, obs: Observation, hour: Hou
     the other bases.
     """
     if config.base == "rebalance":
+        from agents.rebalance import rebalance_plan  # see HourInputs.of
+
         if hour is None:
             raise ConfigError("rollout: the rebalance base needs the hour's forecast")
         u, home, _ = rebalance_plan(city, obs, hour.eta, hour.anchors)

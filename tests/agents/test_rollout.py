@@ -78,6 +78,17 @@ def context(city: City, obs: Observation, fc: Forecast, **cfg) -> object:
     return prepare_step(city, config, obs, DemandTables.build(city, fc, config.ce, config.seed), obs.t % 60)
 
 
+def sampled_requests(ctx, sectors: np.ndarray, key: np.uint64, s: int) -> Requests:
+    """Sample ``s``'s requests as the kernel draws them (:func:`agents._kernels.sample_arrivals`), after the outstanding ones."""
+    city, cfg, obs, tab = ctx.city, ctx.config, ctx.obs, ctx.tables
+    ap, ad, ast = (np.empty(4096, np.int32) for _ in range(3))
+    n = K.sample_arrivals(key, s, cfg.horizon, ctx.minute0, CE_MODES[cfg.ce], sectors.astype(np.int64), tab.eta,
+                          tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum, tab.beta_cum,
+                          np.ones(city.n_nodes, dtype=bool), ap, ad, ast)
+    return Requests(np.concatenate([obs.req_pickup, ap[:n]]), np.concatenate([obs.req_dropoff, ad[:n]]),
+                    np.concatenate([obs.req_entry, obs.t + ast[:n]]))
+
+
 def reference_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
     """Exhaustive enumeration with the ground-truth simulator and the real base policies.
 
@@ -89,18 +100,12 @@ def reference_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
     city, cfg, obs = ctx.city, ctx.config, ctx.obs
     here = int(obs.pos[agent])
     sectors = city.local_sectors(int(city.node_sector[here])) if cfg.scope == "local" else np.arange(city.n_sectors)
-    tab = ctx.tables
     key = np.uint64(K.stream_key(cfg.seed, int(obs.t), agent))
     base = greedy_controls if cfg.base == "greedy" else ia_controls
     cands = candidate_controls(city, obs, agent)
     out = np.zeros((cands.size, cfg.samples), dtype=np.int64)
     for s in range(cfg.samples):
-        ap, ad, ast = (np.empty(4096, np.int32) for _ in range(3))
-        n = K.sample_arrivals(key, s, cfg.horizon, ctx.minute0, CE_MODES[cfg.ce], sectors.astype(np.int64), tab.eta,
-                              tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum, tab.beta_cum,
-                              np.ones(city.n_nodes, dtype=bool), ap, ad, ast)
-        reqs = Requests(np.concatenate([obs.req_pickup, ap[:n]]), np.concatenate([obs.req_dropoff, ad[:n]]),
-                        np.concatenate([obs.req_entry, obs.t + ast[:n]]))
+        reqs = sampled_requests(ctx, sectors, key, s)
         for c, u in enumerate(cands):
             sim = FleetSim(city, reqs, obs.pos)
             sim.state.t, sim.state.tau, sim.state.dest = obs.t, obs.tau.copy(), obs.dest.copy()

@@ -10,7 +10,6 @@ from agents.base import make_policy
 from agents.ia import ia_controls
 from agents.rebalance import rebalance_plan, sector_anchors
 from agents.rollout import (
-    CE_MODES,
     DemandTables,
     HourInputs,
     RolloutConfig,
@@ -23,7 +22,7 @@ from agents.rollout import (
 from city.errors import ConfigError
 from city.sim import FleetSim, Requests
 from city.episode import EpisodeContext, run_episode
-from tests.agents.test_rollout import DATE, StubWorld, grid_city, random_state, uniform_forecast
+from tests.agents.test_rollout import DATE, StubWorld, grid_city, random_state, sampled_requests, uniform_forecast
 
 
 def rebalance_context(city, obs, fc, **cfg):
@@ -47,17 +46,11 @@ def reference_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
     city, cfg, obs = ctx.city, ctx.config, ctx.obs
     here = int(obs.pos[agent])
     sectors = city.local_sectors(int(city.node_sector[here])) if cfg.scope == "local" else np.arange(city.n_sectors)
-    tab = ctx.tables
     key = np.uint64(K.stream_key(cfg.seed, int(obs.t), agent))
     cands = candidate_controls(city, obs, agent)
     out = np.zeros((cands.size, cfg.samples), dtype=np.int64)
     for s in range(cfg.samples):
-        ap, ad, ast = (np.empty(4096, np.int32) for _ in range(3))
-        n = K.sample_arrivals(key, s, cfg.horizon, ctx.minute0, CE_MODES[cfg.ce], sectors.astype(np.int64), tab.eta,
-                              tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum, tab.beta_cum,
-                              np.ones(city.n_nodes, dtype=bool), ap, ad, ast)
-        reqs = Requests(np.concatenate([obs.req_pickup, ap[:n]]), np.concatenate([obs.req_dropoff, ad[:n]]),
-                        np.concatenate([obs.req_entry, obs.t + ast[:n]]))
+        reqs = sampled_requests(ctx, sectors, key, s)
         for c, u in enumerate(cands):
             sim = FleetSim(city, reqs, obs.pos)
             sim.state.t, sim.state.tau, sim.state.dest = obs.t, obs.tau.copy(), obs.dest.copy()

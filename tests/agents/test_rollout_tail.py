@@ -13,12 +13,12 @@ from agents.greedy import greedy_controls
 from agents.ia import ia_controls
 from agents._kernels import PLACE_SCALE
 from agents.place_values import place_values
-from agents.rollout import CE_MODES, agent_costs, candidate_controls, plan_agent
+from agents.rollout import agent_costs, candidate_controls, plan_agent
 from agents.rollout_config import RolloutConfig
 from city.errors import ConfigError
 from city.sim import FleetSim, Requests
 from city.episode import run_episode
-from tests.agents.test_rollout import DATE, StubWorld, context, grid_city, random_state, uniform_forecast
+from tests.agents.test_rollout import DATE, StubWorld, context, grid_city, random_state, sampled_requests, uniform_forecast
 
 
 def reference_tail_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
@@ -45,12 +45,7 @@ def reference_tail_costs(ctx, committed: np.ndarray, agent: int) -> np.ndarray:
     place = place_values(city, tab, sectors)
     out = np.zeros((cands.size, cfg.samples), dtype=np.int64)
     for s in range(cfg.samples):
-        ap, ad, ast = (np.empty(4096, np.int32) for _ in range(3))
-        n = K.sample_arrivals(key, s, cfg.horizon, ctx.minute0, CE_MODES[cfg.ce], sectors.astype(np.int64), tab.eta,
-                              tab.pk_ptr, tab.pk_node, tab.pk_cum, tab.dk_ptr, tab.dk_node, tab.dk_cum, tab.beta_cum,
-                              np.ones(city.n_nodes, dtype=bool), ap, ad, ast)
-        reqs = Requests(np.concatenate([obs.req_pickup, ap[:n]]), np.concatenate([obs.req_dropoff, ad[:n]]),
-                        np.concatenate([obs.req_entry, obs.t + ast[:n]]))
+        reqs = sampled_requests(ctx, sectors, key, s)
         for c, joint in enumerate(joints):
             sim = FleetSim(city, reqs, obs.pos)
             sim.state.t, sim.state.tau, sim.state.dest = obs.t, obs.tau.copy(), obs.dest.copy()
