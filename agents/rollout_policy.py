@@ -116,6 +116,7 @@ class RolloutPolicy(Policy):
         self.context: EpisodeContext | None = None
         self._tables: dict[int, DemandTables] = {}
         self._hour_inputs: dict[int, HourInputs] = {}
+        self._forecasts: dict[int, Forecast] = {}
         self._pool = None
         self.last_waves = None
 
@@ -167,6 +168,7 @@ class RolloutPolicy(Policy):
         self.context = context
         self._tables = {}
         self._hour_inputs = {}
+        self._forecasts = {}
 
     def forecast(self, hour_offset: int) -> Forecast:
         """The provider's forecast of the hour ``hour_offset`` hours after the episode's start."""
@@ -175,10 +177,16 @@ class RolloutPolicy(Policy):
         when = dt.datetime.combine(ctx.date, dt.time()) + dt.timedelta(hours=ctx.hour + hour_offset)
         return self.provider.forecast(ctx.world, when)
 
+    def _hour_forecast(self, hour_offset: int) -> Forecast:
+        """:meth:`forecast`, asked of the provider once an hour for the tables and the rebalance base alike."""
+        if hour_offset not in self._forecasts:
+            self._forecasts[hour_offset] = self.forecast(hour_offset)
+        return self._forecasts[hour_offset]
+
     def tables(self, hour_offset: int) -> DemandTables:
         """Demand tables for the hour ``hour_offset`` hours after the episode's start."""
         if hour_offset not in self._tables:
-            self._tables[hour_offset] = DemandTables.build(self.city, self.forecast(hour_offset), self.config.ce, self.config.seed)
+            self._tables[hour_offset] = DemandTables.build(self.city, self._hour_forecast(hour_offset), self.config.ce, self.config.seed)
         return self._tables[hour_offset]
 
     def hour_inputs(self, hour_offset: int) -> HourInputs | None:
@@ -186,7 +194,7 @@ class RolloutPolicy(Policy):
         if self.config.base != "rebalance":
             return None
         if hour_offset not in self._hour_inputs:
-            self._hour_inputs[hour_offset] = HourInputs.of(self.city, self.forecast(hour_offset))
+            self._hour_inputs[hour_offset] = HourInputs.of(self.city, self._hour_forecast(hour_offset))
         return self._hour_inputs[hour_offset]
 
     def step_context(self, obs: Observation) -> StepContext:

@@ -46,8 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.base import Policy, busy_next_hops
-from agents.rollout import HourInputs, base_controls, candidate_controls
+from agents.base import Policy
+from agents.rollout import candidate_controls
 from agents.waves import Waves, plan_waves
 from bus.checks import Bounds, Rejections, check_ack, check_choice, check_control, check_forecast
 from bus.delta import state_message
@@ -64,6 +64,7 @@ from coordinator.run_config import FleetConfig
 from coordinator.claim import TAKEOVER_WAIT_S, TakenOver, claim, epoch_time, taken_over
 from coordinator.faults import ACK_WAIT_S, RESEND_S, SETTLE_S, Health, PartitionError, agents_text
 from coordinator.metrics import Counted
+from coordinator.minute_base import MinuteBase
 
 _logger = logging.getLogger(__name__)
 
@@ -119,9 +120,7 @@ class Coordinator:
         #: The minute being played, against which proposed controls are checked.
         self.obs: Observation | None = None
         #: ``(minute, base controls)`` of the last minute whose base was computed (:meth:`base`).
-        self.minute_base: tuple[int, np.ndarray, np.ndarray | None] | None = None
-        #: The ``rebalance`` base's reading of the current hour's forecast.
-        self.hour_base: tuple[int, HourInputs] | None = None
+        self.bases = MinuteBase(self.city, self.rollout, self.policy if self.central else None)
         #: The agents of the wave being released whose controls are still awaited, and those that came.
         self.waiting: set[int] = set()
         self.arrived: dict[int, Control] = {}
@@ -209,38 +208,9 @@ class Coordinator:
         hour, forecast = self.hour_forecast
         return sector_message(forecast, self.city, hour, sector).encode()
 
-    def base(self, obs: Observation) -> np.ndarray:
-        """The minute's base controls: the central policy's joint control, or the rollout's base policy's."""
-        return self.base_and_home(obs)[0]
-
-    def base_and_home(self, obs: Observation) -> tuple[np.ndarray, np.ndarray | None]:
-        """The minute's base controls and the ``rebalance`` base's targets (``None`` for the other bases).
-
-        Computed once a minute: a snapshot asked for during the minute gets the same arrays.  Before
-        the run's first forecast (a snapshot asked for while the taxis join) the ``rebalance`` base has
-        no targets yet: every free taxi stays, and the first minute's full state replaces it.
-        """
-        if self.minute_base is not None and self.minute_base[0] == obs.t:
-            return self.minute_base[1], self.minute_base[2]
-        home = None
-        if self.central:
-            base = np.asarray(self.policy.act(obs), dtype=np.int32)  # type: ignore[union-attr]
-        elif self.rollout.base == "rebalance" and (self.hour_forecast is None or self.hour_forecast[0] != obs.t // 60):
-            return busy_next_hops(self.city, obs).astype(np.int32), np.full(obs.pos.size, -1, dtype=np.int32)
-        else:
-            base, home = base_controls(self.city, self.rollout, obs, self._hour_inputs())
-            home = home if home.size else None
-        self.minute_base = (int(obs.t), base, home)
-        return base, home
-
-    def _hour_inputs(self) -> HourInputs | None:
-        """The current hour's forecast as the ``rebalance`` base reads it, computed once an hour (``None`` for the other bases)."""
-        if self.rollout.base != "rebalance" or self.hour_forecast is None:
-            return None
-        hour, forecast = self.hour_forecast
-        if self.hour_base is None or self.hour_base[0] != hour:
-            self.hour_base = (hour, HourInputs.of(self.city, forecast))
-        return self.hour_base[1]
+    def base_and_home(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
+        """The minute's base controls and the ``rebalance`` base's targets (:class:`coordinator.minute_base.MinuteBase`)."""
+        return self.bases.of(obs, self.hour_forecast)
 
     def waves(self, obs: Observation) -> Waves:
         """The minute's turns: by the rollout's dependencies, or all at once for a central policy (each answers its own entry)."""
