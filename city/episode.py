@@ -15,6 +15,7 @@ from typing import Any, ClassVar, Protocol
 import numpy as np
 
 from city.graph import City
+from city.logs import steps
 from city.sim import EpisodeResult, FleetSim, Observation, Requests
 
 
@@ -61,8 +62,13 @@ def episode_requests(world: Any, date: dt.date, hour: int, minutes: int) -> Requ
     return Requests.sorted(*(np.concatenate(x) for x in zip(*parts)))
 
 
-def run_episode(city: City, policy: Controller, requests: Requests, start: np.ndarray, context: EpisodeContext) -> EpisodeResult:
-    """Run one policy for ``context.minutes`` steps and collect its metrics and controls."""
+def run_episode(city: City, policy: Controller, requests: Requests, start: np.ndarray, context: EpisodeContext,
+                show: str | None = None) -> EpisodeResult:
+    """Run one policy for ``context.minutes`` steps and collect its metrics and controls.
+
+    With ``show`` (what the run is), its minutes count as long work
+    (:func:`city.logs.steps`): a bar where the application shows bars.
+    """
     sim = FleetSim(city, requests, start)
     if policy.clairvoyant:
         context = replace(context, future=requests)
@@ -71,12 +77,14 @@ def run_episode(city: City, policy: Controller, requests: Requests, start: np.nd
     plan: list[float] = []
     cpu: list[float] = []
     controls = np.zeros((context.minutes, len(start)), dtype=np.int32)
-    for t in range(context.minutes):
-        obs = sim.observe()
-        t0, c0 = time.perf_counter(), time.process_time()
-        u = policy.act(obs)
-        plan.append(time.perf_counter() - t0)
-        cpu.append(time.process_time() - c0)
-        controls[t] = u
-        costs.append(sim.step(u))
+    with steps(context.minutes if show else 0, "minute", show or "") as minutes:
+        for t in range(context.minutes):
+            obs = sim.observe()
+            t0, c0 = time.perf_counter(), time.process_time()
+            u = policy.act(obs)
+            plan.append(time.perf_counter() - t0)
+            cpu.append(time.process_time() - c0)
+            controls[t] = u
+            costs.append(sim.step(u))
+            minutes.update()
     return sim.result(costs, controls, plan, cpu)

@@ -10,7 +10,12 @@ bars.
 
 Processes that surge spawns (the fleet's roles, evaluation workers) call
 :func:`inherit`: they take the parent's level from :data:`LEVEL_ENV`, which
-:func:`setup` exports, so ``surge -q fleet`` quiets every process.
+:func:`setup` exports, so ``surge -q fleet`` quiets every process.  Whether
+the parent shows bars travels in :data:`BARS_ENV`, for a spawned process that
+counts long work of its own (the fleet's coordinator counts its minutes).
+
+Result lines that a command prints while a bar runs go through :func:`echo`,
+so that they never tear the bar.
 
 Python ``warnings`` (notes about users' data, such as interpolated weather
 hours) stay warnings, so that library callers can filter or catch them; under
@@ -31,6 +36,8 @@ from typing import Protocol
 PACKAGES = ("surge", "city", "bus", "agents", "predictor", "coordinator")
 #: The level spawned processes inherit, as a level name.
 LEVEL_ENV = "SURGE_LOG_LEVEL"
+#: Set to ``1`` where the application shows bars (:func:`set_steps`), for the processes it spawns.
+BARS_ENV = "SURGE_BARS"
 _HANDLER = "surge"
 
 
@@ -131,12 +138,34 @@ class _NoSteps:
 #: Makes a step counter from ``total`` and ``unit`` (``"instance"``, ``"epoch"``) and ``desc`` (what the work is).
 StepsFactory = Callable[..., Steps]
 _factory: StepsFactory | None = None
+_echo: Callable[[str], None] | None = None
 
 
-def set_steps(factory: StepsFactory | None) -> None:
-    """Show the steps of long work with ``factory`` (the CLI's progress bar), or nowhere (``None``)."""
-    global _factory
-    _factory = factory
+def set_steps(factory: StepsFactory | None, echo: Callable[[str], None] | None = None) -> None:
+    """Show the steps of long work with ``factory`` (the CLI's progress bar), or nowhere (``None``).
+
+    ``echo`` prints a result line to stdout without tearing a bar (tqdm's
+    ``write``).  The choice is exported in :data:`BARS_ENV` for spawned processes.
+    """
+    global _factory, _echo
+    _factory, _echo = factory, echo
+    if factory is None:
+        os.environ.pop(BARS_ENV, None)
+    else:
+        os.environ[BARS_ENV] = "1"
+
+
+def bars_wanted() -> bool:
+    """Whether the process that spawned this one shows bars (:data:`BARS_ENV`)."""
+    return os.environ.get(BARS_ENV) == "1"
+
+
+def echo(line: str) -> None:
+    """Print a result line on stdout, above any bar that is running."""
+    if _echo is None:
+        print(line, flush=True)
+    else:
+        _echo(line)
 
 
 def steps(total: int, unit: str, desc: str) -> Steps:

@@ -31,7 +31,6 @@ from bus.certs import fleet_size, make_certs, taxi_name
 from bus.router import free_tcp_port, router_main, wait_for_tcp
 from bus.session import SessionArgs
 from city.errors import ConfigError, SurgeError
-from city.logs import inherit
 from coordinator.run_config import FleetConfig
 
 _logger = logging.getLogger(__name__)
@@ -61,9 +60,10 @@ def _coordinator_entry(cfg: FleetConfig, bus: SessionArgs, result_path: str, run
     import signal
 
     from coordinator.runtime import coordinator_main
+    from coordinator.terminal import inherit as show_as_parent
 
     signal.signal(signal.SIGTERM, lambda signum, _: sys.exit(128 + signum))  # unwinds, so the run's stop goes out
-    inherit()
+    show_as_parent()  # the command's level, and a bar of the run's minutes where it shows bars
     try:
         coordinator_main(cfg, bus, result_path, run_dir=run_dir, resume=resume)
     except SurgeError as exc:
@@ -78,7 +78,7 @@ def in_process(cfg: FleetConfig) -> dict:
     from city.episode import run_episode
 
     scen, requests, start, context = cfg.instance()
-    res = run_episode(scen.city, cfg.make_policy(scen.city), requests, start, context)
+    res = run_episode(scen.city, cfg.make_policy(scen.city), requests, start, context, show="in-process replay")
     return {"total_cost": res.total_cost, "served": res.served, "decisions_sha256": res.decisions_sha256,
             "step_seconds": {"median": float(np.median(res.plan_seconds)), "max": float(np.max(res.plan_seconds))}}
 

@@ -58,6 +58,7 @@ from bus.wire import ENCODING, Ack, Control, ForecastMsg, ForecastRequest, RunSp
 from city.errors import ConfigError
 from city.fingerprint import city_sha256, code_version
 from city.forecast import Forecast
+from city.logs import steps
 from city.sim import FleetSim, Observation, decisions_hash
 from coordinator import checkpoint
 from coordinator.run_config import FleetConfig
@@ -313,30 +314,32 @@ class Coordinator:
         previous = None
         first = int(self.sim.state.t)
         t_start = time.perf_counter()
-        for t in range(first, cfg.minutes):
-            t0 = time.perf_counter()
-            if self.health.partitioned():
-                self._partition(inbox, t)  # the clock does not run while most of the fleet is cut off
-            obs = self.obs = self.sim.observe()
-            if (t % 60 == 0 or t == first) and not self.central:
-                self.forecast_msg = self._forecast(session, inbox, t // 60)
-                self._hold_forecast(pub_forecast, t // 60)
-            base, home = self.base_and_home(obs)
-            pub_state.put(state_message(obs, previous, base, self.epoch, home).encode())
-            previous = np.asarray(obs.req_index)
-            u = base.copy()
-            waves = self.waves(obs)
-            tally.waves.append(self._turns(inbox, turn_pub, commit_pub, t, waves, base, u))
-            controls[t] = u
-            costs.append(self.sim.step(u))
-            step_s.append(time.perf_counter() - t0)
-            if self.run_dir is not None:
-                checkpoint.save(self.run_dir, asdict(cfg), self.sim, tally, self.epoch)
-            if self.progress:
-                free = int((obs.tau == 0).sum())
-                log(f"minute {t + 1}/{cfg.minutes}: {free} free {'taxi' if free == 1 else 'taxis'} took turns, "
-                    f"{costs[-1]} requests waiting ({step_s[-1]:.2f} s)")
-            self._pace(inbox, t0 + cfg.minute_s)
+        with steps(cfg.minutes - first if self.progress else 0, "minute", f"run {cfg.run}") as minutes:
+            for t in range(first, cfg.minutes):
+                t0 = time.perf_counter()
+                if self.health.partitioned():
+                    self._partition(inbox, t)  # the clock does not run while most of the fleet is cut off
+                obs = self.obs = self.sim.observe()
+                if (t % 60 == 0 or t == first) and not self.central:
+                    self.forecast_msg = self._forecast(session, inbox, t // 60)
+                    self._hold_forecast(pub_forecast, t // 60)
+                base, home = self.base_and_home(obs)
+                pub_state.put(state_message(obs, previous, base, self.epoch, home).encode())
+                previous = np.asarray(obs.req_index)
+                u = base.copy()
+                waves = self.waves(obs)
+                tally.waves.append(self._turns(inbox, turn_pub, commit_pub, t, waves, base, u))
+                controls[t] = u
+                costs.append(self.sim.step(u))
+                step_s.append(time.perf_counter() - t0)
+                if self.run_dir is not None:
+                    checkpoint.save(self.run_dir, asdict(cfg), self.sim, tally, self.epoch)
+                if self.progress:
+                    free = int((obs.tau == 0).sum())
+                    log(f"minute {t + 1}/{cfg.minutes}: {free} free {'taxi' if free == 1 else 'taxis'} took turns, "
+                        f"{costs[-1]} requests waiting ({step_s[-1]:.2f} s)")
+                self._pace(inbox, t0 + cfg.minute_s)
+                minutes.update()
         res = self.sim.result(costs, controls, step_s)
         from city.scenario import SHARE_ENV
 

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from coordinator.experiments.rl_train import TrainConfig, train, write
+from coordinator.terminal import configure
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -29,7 +30,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--eval-seeds", type=int, default=len(d.eval_seeds), help="evaluation instances per date (seeds 500 and up)")
     p.add_argument("--seed", type=int, default=d.seed, help="PPO's seed")
     p.add_argument("--out", type=Path, default=Path("rl-training"), help="folder for rl-training.json and rl-training.png")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar and no learning-curve lines, warnings only")
     args = p.parse_args(argv)
+    configure(quiet=args.quiet)  # a bar with ETA on a terminal, the learning curve's points as log lines
     for name in ("taxis", "minutes", "timesteps", "eval_every", "eval_seeds"):
         if getattr(args, name) < 1:
             p.error(f"--{name.replace('_', '-')} must be at least 1")

@@ -2,7 +2,7 @@
 
 Every subcommand reports bad input as one line on stderr and exits with
 status 2; long work shows progress on stderr (a bar with ETA on a terminal,
-one line per finished step otherwise: :mod:`coordinator.cli.terminal`) and
+one line per finished step otherwise: :mod:`coordinator.terminal`) and
 results on stdout.  ``-q`` keeps warnings and errors only, ``-v`` adds debug
 messages.  argparse lives only in this package.
 """
@@ -51,7 +51,7 @@ def _terminated(signum: int, frame: object) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from coordinator.cli.terminal import configure
+    from coordinator.terminal import configure
 
     signal.signal(signal.SIGTERM, _terminated)
     configure()  # warnings while parsing are one line too

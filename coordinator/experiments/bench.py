@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agents.shortcuts import Shortcuts
+from city.logs import echo, steps
 
 if TYPE_CHECKING:
     from agents.base import EpisodeContext
@@ -116,24 +117,28 @@ def bench_city(cfg: CityBench) -> int:
         data = check_scenario("nyc", cfg.data)
         builders["nyc"] = lambda: load_nyc_city(data)
     out: dict = {"schema": "surge.bench.city/1", "cpus": os.cpu_count(), "cities": {}}
+    bar = steps(2 * cfg.repeat * len(builders), "run", "bench city")
     for name, build in builders.items():
         times, loads = [], []
         for _ in range(cfg.repeat):
             t0 = time.perf_counter()
             city = build()
             times.append(time.perf_counter() - t0)
+            bar.update()
         path = Path(f"/tmp/surge-bench-{name}-{os.getpid()}.npz")
         city.save(path)
         for _ in range(cfg.repeat):
             t0 = time.perf_counter()
             City.load(path)
             loads.append(time.perf_counter() - t0)
+            bar.update()
         size = path.stat().st_size / 2**20
         path.unlink()
         out["cities"][name] = {"city": city.summary(), "build_seconds": _stats(times), "load_seconds": _stats(loads), "file_mb": size}
         s = city.summary()
-        print(f"{name:<10} {s['intersections']:>5} nodes {s['streets']:>5} edges {s['sectors']:>3} sectors  "
-              f"build {statistics.median(times):6.2f} s (min {min(times):.2f})  load {statistics.median(loads) * 1e3:6.1f} ms  file {size:.1f} MB")
+        echo(f"{name:<10} {s['intersections']:>5} nodes {s['streets']:>5} edges {s['sectors']:>3} sectors  "
+             f"build {statistics.median(times):6.2f} s (min {min(times):.2f})  load {statistics.median(loads) * 1e3:6.1f} ms  file {size:.1f} MB")
+    bar.close()
     if cfg.json:
         Path(cfg.json).write_text(json.dumps(out, indent=1))
     return 0
@@ -150,6 +155,7 @@ def bench_sim(cfg: SimBench) -> int:
     requests = episode_requests(scen.world, date, cfg.hour, 60)
     policy = make_policy("greedy", scen.city)
     act, step, total = [], [], []
+    bar = steps(cfg.episodes, "episode", "bench sim")
     for seed in range(cfg.episodes):
         sim = FleetSim(scen.city, requests, initial_positions(scen.city, cfg.taxis, seed))
         policy.reset(EpisodeContext(scen.city, date, cfg.hour, 60, seed, scen.world))
@@ -164,6 +170,8 @@ def bench_sim(cfg: SimBench) -> int:
             act.append(t1 - t0)
             step.append(t2 - t1)
         total.append(60 / (time.perf_counter() - t_ep))
+        bar.update()
+    bar.close()
     out = {
         "schema": "surge.bench.sim/1",
         "city": scen.city.summary(),
@@ -304,21 +312,23 @@ def bench_plan(cfg: PlanBench) -> int:
                                                  "forecast", "workers", "variants")},
         "policies": {},
     }
-    for name in cfg.policies:
-        with ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn")) as pool:
-            res = pool.submit(_plan_child, cfg, name).result()
-        out["city"] = res.pop("city")
-        out["policies"][name] = res
-        print(f"{name} ({res['approximations']}): free taxis {res['free_taxis']}, critical path {res['critical_path']} waves, "
-              f"peak RSS {res['peak_rss_mb']:.0f} MB, first call {res['first_call_seconds']:.2f} s", flush=True)
-        for v, rec in res["variants"].items():
-            st = rec["plan_seconds_per_step"]
-            per_free = statistics.median(rec["seconds_per_free_taxi"]) * 1e3
-            same = "same decisions" if rec["hashes"] == res["hashes"] else "DIFFERENT decisions"
-            print(f"  {v:<16} {st['median']:8.3f} s/step median (min {st['min']:.3f}, max {st['max']:.3f})  "
-                  f"{per_free:6.2f} ms per free taxi  cpu {rec['cpu_seconds_per_step']['median']:.3f} s  "
-                  f"settled {statistics.mean(rec['settled_share']):5.1%} of decisions, "
-                  f"{statistics.mean(rec['shadow_share']):5.1%} of candidate samples  {same}", flush=True)
+    with steps(len(cfg.policies), "policy", "bench plan") as bar:
+        for name in cfg.policies:
+            with ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn")) as pool:
+                res = pool.submit(_plan_child, cfg, name).result()
+            out["city"] = res.pop("city")
+            out["policies"][name] = res
+            echo(f"{name} ({res['approximations']}): free taxis {res['free_taxis']}, critical path {res['critical_path']} waves, "
+                 f"peak RSS {res['peak_rss_mb']:.0f} MB, first call {res['first_call_seconds']:.2f} s")
+            for v, rec in res["variants"].items():
+                st = rec["plan_seconds_per_step"]
+                per_free = statistics.median(rec["seconds_per_free_taxi"]) * 1e3
+                same = "same decisions" if rec["hashes"] == res["hashes"] else "DIFFERENT decisions"
+                echo(f"  {v:<16} {st['median']:8.3f} s/step median (min {st['min']:.3f}, max {st['max']:.3f})  "
+                     f"{per_free:6.2f} ms per free taxi  cpu {rec['cpu_seconds_per_step']['median']:.3f} s  "
+                     f"settled {statistics.mean(rec['settled_share']):5.1%} of decisions, "
+                     f"{statistics.mean(rec['shadow_share']):5.1%} of candidate samples  {same}")
+            bar.update()
     pol = out["policies"]
     if "garces2023" in pol:
         for label in (p for p in pol if parse_policy(p)[0] == "surge"):

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from city.logs import steps
 from coordinator.metrics import median, project_minutes
 from coordinator.run_config import FleetConfig
 
@@ -100,18 +101,20 @@ def sequential_in_process(cfg: FleetConfig) -> dict:
     controls = np.zeros((cfg.minutes, cfg.taxis), dtype=np.int32)
     minute_s: list[float] = []
     plan_s: dict[tuple[int, int], float] = {}
-    for t in range(cfg.minutes):
-        obs = sim.observe()
-        t0 = time.perf_counter()
-        ctx = policy.step_context(obs)
-        u = ctx.base_controls.copy()
-        for agent in np.flatnonzero(obs.tau == 0).tolist():
-            a0 = time.perf_counter()
-            u[agent] = plan_agent(ctx, u[:agent], agent)
-            plan_s[(t, agent)] = time.perf_counter() - a0
-        minute_s.append(time.perf_counter() - t0)
-        controls[t] = u
-        sim.step(u)
+    with steps(cfg.minutes, "minute", "in-process replay") as minutes:
+        for t in range(cfg.minutes):
+            obs = sim.observe()
+            t0 = time.perf_counter()
+            ctx = policy.step_context(obs)
+            u = ctx.base_controls.copy()
+            for agent in np.flatnonzero(obs.tau == 0).tolist():
+                a0 = time.perf_counter()
+                u[agent] = plan_agent(ctx, u[:agent], agent)
+                plan_s[(t, agent)] = time.perf_counter() - a0
+            minute_s.append(time.perf_counter() - t0)
+            controls[t] = u
+            sim.step(u)
+            minutes.update()
     return {"decisions_sha256": decisions_hash(controls), "minute_seconds": minute_s, "plan_s": plan_s}
 
 

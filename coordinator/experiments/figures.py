@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from city.graph import City
+from city.logs import steps
 from city.sim import FleetSim, Requests
 
 
@@ -88,12 +89,14 @@ def track(city: City, policy, requests: Requests, start: np.ndarray, context, la
     sim = FleetSim(city, requests, start)
     policy.reset(replace(context, future=requests) if policy.clairvoyant else context)
     pos, busy, waiting, cost = [], [], [], []
-    for _ in range(context.minutes):
-        obs = sim.observe()
-        pos.append(obs.pos.copy())
-        busy.append(obs.tau > 0)
-        waiting.append(obs.req_index.copy())
-        cost.append(sim.step(policy.act(obs)))
+    with steps(context.minutes, "minute", f"replay {label}") as minutes:
+        for _ in range(context.minutes):
+            obs = sim.observe()
+            pos.append(obs.pos.copy())
+            busy.append(obs.tau > 0)
+            waiting.append(obs.req_index.copy())
+            cost.append(sim.step(policy.act(obs)))
+            minutes.update()
     return Track(label, np.array(pos), np.array(busy), waiting, cost, int((sim.state.picked_at >= 0).sum()))
 
 
@@ -125,5 +128,6 @@ def surge_gif(city: City, requests: Requests, tracks: list[Track], path: str | P
         return out
 
     anim = FuncAnimation(fig, frame, frames=len(tracks[0].pos), blit=False)
-    anim.save(path, writer=PillowWriter(fps=4))
+    with steps(len(tracks[0].pos), "frame", f"GIF {Path(path).name}") as frames:
+        anim.save(path, writer=PillowWriter(fps=4), progress_callback=lambda _i, _n: frames.update())
     plt.close(fig)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import logging
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
@@ -42,6 +43,7 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 
 from agents.greedy import greedy_controls
 from city.fingerprint import machine
+from city.logs import steps
 from coordinator.experiments.analysis import bootstrap_ci
 from coordinator.rl_env import EnvConfig, FleetParallelEnv
 
@@ -170,6 +172,7 @@ class _Curve(BaseCallback):
     def __init__(self, cfg: TrainConfig, log: Callable[[str], None]) -> None:
         super().__init__()
         self.cfg, self.log, self.points, self.next_at, self.t0 = cfg, log, [], 0, time.perf_counter()
+        self.bar, self.counted = steps(cfg.timesteps, "agent-step", "train PPO"), 0
 
     def record(self) -> None:
         costs = [r["total_cost"] for r in play(self.cfg, model_policy(self.model))]
@@ -179,6 +182,8 @@ class _Curve(BaseCallback):
         self.log(f"{point['timesteps']:>9} agent-steps  {point['seconds']:>7.1f} s  mean total cost {point['mean_total_cost']:.1f}")
 
     def _on_step(self) -> bool:
+        self.bar.update(self.num_timesteps - self.counted)
+        self.counted = self.num_timesteps
         if self.num_timesteps >= self.next_at:
             self.record()
             self.next_at = self.num_timesteps + self.cfg.eval_every
@@ -193,7 +198,7 @@ def paired_summary(mine: list[dict], other: list[dict]) -> dict:
             "ties": int((diff == 0).sum()), "n": int(diff.size)}
 
 
-def train(cfg: TrainConfig, command: str = "", log: Callable[[str], None] = print) -> tuple[MaskablePPO, dict]:
+def train(cfg: TrainConfig, command: str = "", log: Callable[[str], None] = logging.getLogger(__name__).info) -> tuple[MaskablePPO, dict]:
     """Train the shared policy; the results document (curve, final costs, paired differences against greedy and stay)."""
     torch.set_num_threads(cfg.threads)
     set_random_seed(cfg.seed)
@@ -204,7 +209,8 @@ def train(cfg: TrainConfig, command: str = "", log: Callable[[str], None] = prin
     model.action_space.seed(cfg.seed)
     curve = _Curve(cfg, log)
     start = time.perf_counter()
-    model.learn(total_timesteps=cfg.timesteps, callback=curve)
+    with curve.bar:
+        model.learn(total_timesteps=cfg.timesteps, callback=curve)
     curve.record()
     seconds = time.perf_counter() - start
     vec.close()

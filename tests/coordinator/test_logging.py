@@ -2,20 +2,25 @@
 
 from __future__ import annotations
 
+import fcntl
 import io
 import logging
 import os
+import pty
+import struct
 import subprocess
 import sys
+import termios
+import threading
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from city.logs import LEVEL_ENV, LineFormatter, set_steps, setup, steps
+from city.logs import BARS_ENV, LEVEL_ENV, LineFormatter, set_steps, setup, steps
 from coordinator.cli import main
-from coordinator.cli.terminal import BarSafeHandler, bar, configure
+from coordinator.terminal import BarSafeHandler, bar, configure, inherit
 
 TINY = ["--hours", "19", "--seeds", "2", "--taxis", "3", "--minutes", "3", "--policies", "greedy"]
 
@@ -128,3 +133,65 @@ def test_a_spawned_process_inherits_the_level_and_one_line_warnings() -> None:
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2]), LEVEL_ENV: "WARNING"}
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60)
     assert done.returncode == 0 and done.stderr == "surge: warning: weather: 3 hours interpolated\n", done.stderr
+
+
+def test_a_spawned_worker_shows_bars_only_where_the_command_does(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The fleet's coordinator (:func:`coordinator.terminal.inherit`): the command's level, and its bars where it shows them."""
+    monkeypatch.setattr(sys, "stderr", FakeTerminal())
+    configure()
+    assert os.environ[BARS_ENV] == "1"
+    inherit()
+    assert steps(3, "minute", "fleet").__class__.__name__ == "tqdm"
+    assert isinstance(logging.getLogger("coordinator").handlers[-1], BarSafeHandler)
+    configure(quiet=True)
+    assert BARS_ENV not in os.environ
+    inherit()
+    assert steps(3, "minute", "fleet").__class__.__name__ == "_NoSteps"
+    assert logging.getLogger("coordinator").level == logging.WARNING
+
+
+def on_a_terminal(args: list[str], timeout: float = 300) -> tuple[int, str, str]:
+    """Run ``args`` with stderr on a pseudo-terminal (120 columns), as in an interactive shell; (status, stdout, the terminal's text)."""
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 120, 0, 0))
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    for name in (LEVEL_ENV, BARS_ENV):
+        env.pop(name, None)
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=slave, text=True, env=env)
+    os.close(slave)
+    shown: list[bytes] = []
+
+    def drain() -> None:  # a full terminal buffer would block the command
+        while True:
+            try:
+                data = os.read(master, 4096)
+            except OSError:  # EIO: every process holding the terminal has exited
+                return
+            if not data:
+                return
+            shown.append(data)
+
+    reader = threading.Thread(target=drain, daemon=True)
+    reader.start()
+    out, _ = proc.communicate(timeout=timeout)
+    reader.join(10)
+    os.close(master)
+    return proc.returncode, out, b"".join(shown).decode(errors="replace")
+
+
+def test_demo_shows_bars_for_the_fleets_minutes_replays_and_gif(tmp_path: Path) -> None:
+    """The fleet's minutes count in its coordinator, a spawned process; the replays and the GIF's frames in the command."""
+    status, out, term = on_a_terminal([sys.executable, "-m", "coordinator.cli", "demo", "--taxis", "2", "--minutes", "3",
+                                       "--out", str(tmp_path)])
+    assert status == 0, term
+    assert "decisions identical" in out and "\r" in term
+    for bar_text in ("run demo: 100%", "3/3 [", "minute/s", "in-process replay", "replay greedy", "frame/s"):
+        assert bar_text in term, bar_text
+    assert "minute 3/3" in term  # the log lines stay, above the bars
+
+
+def test_bench_shows_a_bar_and_keeps_its_results_on_stdout() -> None:
+    status, out, term = on_a_terminal([sys.executable, "-m", "coordinator.cli", "bench", "sim", "--taxis", "4", "--episodes", "2"])
+    assert status == 0, term
+    assert "bench sim" in term and "episode/s" in term and "2/2 [" in term
+    assert "steps/s" in out and "steps/s" not in term

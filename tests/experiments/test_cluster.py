@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import re
 from pathlib import Path
 
@@ -10,6 +11,7 @@ import pytest
 distributed = pytest.importorskip("distributed")
 
 from city.errors import ConfigError  # noqa: E402 - after the importorskip, so the module skips without dask
+from city.logs import LEVEL_ENV  # noqa: E402 - after the importorskip, so the module skips without dask
 from coordinator.cli import main  # noqa: E402 - after the importorskip, so the module skips without dask
 from coordinator.experiments.evaluate import EvalConfig, evaluate  # noqa: E402 - after the importorskip, so the module skips without dask
 
@@ -55,3 +57,17 @@ def test_cluster_errors_are_one_line(capsys: pytest.CaptureFixture) -> None:
 
     with pytest.raises(ConfigError, match=r"--cluster tcp://127.0.0.1:9: no Dask scheduler answers there"):
         list(run_on_cluster("tcp://127.0.0.1:9", abs, [1], timeout_s=1))
+
+
+def surge_level(logger: str) -> int:
+    """The level a worker shows ``logger``'s records at (a module function, so that the workers can import it)."""
+    return logging.getLogger(logger).getEffectiveLevel()
+
+
+def test_workers_take_the_commands_log_level(cluster: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``surge -q``/``-v`` reach a worker that was started apart from the command."""
+    from coordinator.experiments.sweeps import run_on_cluster
+
+    for level, number in (("WARNING", logging.WARNING), ("DEBUG", logging.DEBUG)):
+        monkeypatch.setenv(LEVEL_ENV, level)
+        assert list(run_on_cluster(cluster, surge_level, ["coordinator", "agents"])) == [number, number]
