@@ -218,6 +218,7 @@ def _plan_child(cfg: PlanBench, label: str) -> dict:
     from agents.base import make_policy, parse_policy
     from agents.waves import plan_waves
     from city.logs import inherit
+    from coordinator.experiments.results import demand_source
 
     inherit()  # the parent's log level and one-line warnings, in this spawned process too
     if cfg.threads:
@@ -281,6 +282,7 @@ def _plan_child(cfg: PlanBench, label: str) -> dict:
         "rollout": dataclasses.asdict(rollout) if rollout else None,
         "approximations": rollout.approximations() if rollout else "exact",
         "city": scen.city.summary(),
+        "demand_source": demand_source(scen.world),
     }
 
 
@@ -317,6 +319,7 @@ def bench_plan(cfg: PlanBench) -> int:
             with ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn")) as pool:
                 res = pool.submit(_plan_child, cfg, name).result()
             out["city"] = res.pop("city")
+            out["demand_source"] = res.pop("demand_source")
             out["policies"][name] = res
             echo(f"{name} ({res['approximations']}): free taxis {res['free_taxis']}, critical path {res['critical_path']} waves, "
                  f"peak RSS {res['peak_rss_mb']:.0f} MB, first call {res['first_call_seconds']:.2f} s")

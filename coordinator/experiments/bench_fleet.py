@@ -93,6 +93,7 @@ def sequential_in_process(cfg: FleetConfig) -> dict:
     """The instance in-process with strictly sequential turns (as ``RolloutPolicy.act`` without workers), each agent timed."""
     from agents.rollout import plan_agent
     from city.sim import FleetSim, decisions_hash
+    from coordinator.experiments.results import demand_source
 
     scen, requests, start, context = cfg.instance()
     policy = cfg.make_policy(scen.city)
@@ -115,7 +116,8 @@ def sequential_in_process(cfg: FleetConfig) -> dict:
             controls[t] = u
             sim.step(u)
             minutes.update()
-    return {"decisions_sha256": decisions_hash(controls), "minute_seconds": minute_s, "plan_s": plan_s}
+    return {"decisions_sha256": decisions_hash(controls), "minute_seconds": minute_s, "plan_s": plan_s,
+            "demand_source": demand_source(scen.world)}
 
 
 def restart_report(dist: dict, restart: dict) -> dict:
@@ -143,6 +145,7 @@ def fleet_report(cfg: FleetConfig, dist: dict, seq: dict, memory: dict, hosts: l
         "schema": "surge.bench.fleet/1",
         "config": {"scenario": cfg.scenario, "taxis": cfg.taxis, "minutes": cfg.minutes, "date": cfg.date, "hour": cfg.hour,
                    "policy": cfg.policy, "options": cfg.options, "secured": dist.get("secured"), "agent_threads": agent_threads},
+        "demand_source": seq["demand_source"],
         "same_decisions": dist["decisions_sha256"] == seq["decisions_sha256"],
         "decisions_sha256": {"distributed": dist["decisions_sha256"], "in_process": seq["decisions_sha256"]},
         "fallbacks": dist["fallbacks"],

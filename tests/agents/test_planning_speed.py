@@ -152,7 +152,9 @@ def test_bench_plan_reports_variants_side_by_side(tmp_path: Path) -> None:
     proc = run_cli("bench", "plan", "--taxis", "12", "--samples", "8", "--horizon", "3", "--steps", "2", "--warmup", "2",
                    "--policies", "surge", "--forecast", "true-rate", "--variants", "all", "none", "with-minute_lists", "--workers", "2", "--json", str(out))
     assert proc.returncode == 0, proc.stderr
-    res = json.loads(out.read_text())["policies"]["surge"]
+    doc = json.loads(out.read_text())
+    assert doc["demand_source"].startswith("synthetic profile")  # what the timed states' demand was made of
+    res = doc["policies"]["surge"]
     assert set(res["variants"]) == {"all", "none", "with-minute_lists"}
     assert res["variants"]["all"]["hashes"] == res["variants"]["none"]["hashes"] == res["variants"]["with-minute_lists"]["hashes"]
     assert len(res["free_taxis"]) == len(res["critical_path"]) == len(res["seconds_per_free_taxi"]) == 2

@@ -99,6 +99,7 @@ def test_bench_fleet_on_the_real_map_prints_and_writes_every_figure(policy: str,
     assert rep["ready_seconds"] > 0 and rep["traffic"]["messages_per_minute"] > 0
     assert len(rep["critical_path"]) == 3 and set(rep["projected_minute_seconds_median"]) == {"2", "one per agent"}
     assert rep["config"]["agent_threads"] == "share"  # the default: the host's cores split among the agents planning
+    assert rep["demand_source"].startswith("hourly-totals ")  # the real map at the real level of the hour, recorded
     for line in ("(share kernel threads each)", "decisions identical", "median minute: distributed", "agents' memory", "all agents ready",
                  "projected median minute"):
         assert line in run.stdout, line
