@@ -20,7 +20,9 @@ Every folder ``benchmarks/<question>/`` may contribute sections by holding a
 
 Kinds: ``fields`` (a table of values read from the files by dotted paths; no
 code needed), ``paired-results`` (paired comparisons of ``surge.results/1``
-files), ``paired-runs`` (two sets of runs compared minute by minute) and
+files), ``paired-runs`` (two sets of runs compared minute by minute), ``gap-closed``
+(the share of the greedy→oracle gap each policy closes; both it and
+``paired-results`` split a file by date with ``by_date = true``) and
 ``cluster-rounds`` (timed rounds of one sweep two ways). A new kind is a
 function ``(Section) -> list[str]`` of Markdown lines registered with
 :func:`renderer`, in any module a ``page.toml`` names.
@@ -247,19 +249,46 @@ def render_paired_results(sec: Section) -> list[str]:
     labels = sec.get("labels", sec.need("files"))
     rows = []
     for file, label in zip(sec.need("files"), labels):
-        doc = complete_seeds(read_results(sec.path(file)))
-        for hour in sorted({e["hour"] for e in doc["episodes"]}):
-            r = compare_pair(doc, policy, against, hour)
-            if r is None:
-                continue
-            overhead = None if r["overhead_reduction"] is None else -r["overhead_reduction"]
-            rows.append([label, f"{hour} h", f"{r['wins']} / {r['n']}", fmt(r["cost_difference"], "{:+.1f}"),
-                         fmt(r["ci95"], "{:+.1f}"), fmt(100 * r["relative_difference"], "{:+.1f} %"),
-                         fmt(100 * overhead if overhead is not None else None, "{:+.1f} %"),
-                         fmt(100 * r["served_change"], "{:+.1f} %")])
+        for name, doc in _by_date(complete_seeds(read_results(sec.path(file))), label, sec.get("by_date", False)):
+            for hour in sorted({e["hour"] for e in doc["episodes"]}):
+                r = compare_pair(doc, policy, against, hour)
+                if r is None:
+                    continue
+                overhead = None if r["overhead_reduction"] is None else -r["overhead_reduction"]
+                rows.append([name, f"{hour} h", f"{r['wins']} / {r['n']}", fmt(r["cost_difference"], "{:+.1f}"),
+                             fmt(r["ci95"], "{:+.1f}"), fmt(100 * r["relative_difference"], "{:+.1f} %"),
+                             fmt(100 * overhead if overhead is not None else None, "{:+.1f} %"),
+                             fmt(100 * r["served_change"], "{:+.1f} %")])
     head = ["", "hour", "`" + policy + "` wins", "mean difference", "95 % CI", "relative",
             "wait overhead per served", "served"]
     return table(head, rows)
+
+
+def _by_date(doc: dict, label: str, by_date: bool) -> list[tuple[str, dict]]:
+    """The document whole under ``label``, or (``by_date``) one part a date, labelled ``label, date``."""
+    if not by_date:
+        return [(label, doc)]
+    dates = sorted({e["date"] for e in doc["episodes"]})
+    return [(f"{label}, {d}", {**doc, "episodes": [e for e in doc["episodes"] if e["date"] == d]}) for d in dates]
+
+
+@renderer("gap-closed")
+def render_gap_closed(sec: Section) -> list[str]:
+    """The share of the greedy→oracle gap in mean total cost that each of ``policies`` closes, per file and hour."""
+    from coordinator.experiments.analysis import complete_seeds, summarize
+    from coordinator.experiments.results import read_results
+
+    policies = sec.need("policies")
+    labels = sec.get("labels", sec.need("files"))
+    rows = []
+    for file, label in zip(sec.need("files"), labels):
+        for name, doc in _by_date(complete_seeds(read_results(sec.path(file))), label, sec.get("by_date", False)):
+            gap = {(r["hour"], r["policy"]): r["gap_closed"] for r in summarize(doc)}
+            seeds = {h: len({(e["date"], e["seed"]) for e in doc["episodes"] if e["hour"] == h}) for h in {e["hour"] for e in doc["episodes"]}}
+            for hour in sorted(seeds):
+                cells = [gap.get((hour, p)) for p in policies]
+                rows.append([name, f"{hour} h", str(seeds[hour])] + [fmt(None if g is None else 100 * g, "{:.1f} %") for g in cells])
+    return table(["", "hour", "instances"] + [f"`{p}`" for p in policies], rows)
 
 
 def _bootstrap(diffs: list[float]) -> tuple[float, float]:

@@ -72,6 +72,46 @@ def test_a_new_kind_registers_from_the_module_a_page_names(tmp_path: Path, monke
     results_page.RENDERERS.pop("shout")
 
 
+def test_paired_results_by_date_and_the_gap_closed(tmp_path: Path) -> None:
+    """Two dates in one results file: a row per date and hour, and each policy's share of the greedy→oracle gap."""
+    from coordinator.experiments.evaluate import EvalConfig, evaluate
+
+    doc = evaluate(EvalConfig(dates=["2022-11-17", "2022-11-18"], hours=[19], seeds=2, taxis=4, minutes=6,
+                              policies=["greedy", "ia"]), progress=lambda _m: None)
+    _folder(tmp_path, """
+[[section]]
+title = "By date"
+kind = "paired-results"
+files = ["run.json"]
+labels = ["city"]
+policy = "ia"
+against = "greedy"
+by_date = true
+command = "c"
+date = "2026-12-06"
+machine = "m"
+
+[[section]]
+title = "Gap"
+kind = "gap-closed"
+files = ["run.json"]
+labels = ["city"]
+policies = ["ia", "greedy"]
+command = "c"
+date = "2026-12-06"
+machine = "m"
+""", doc)
+    page = results_page.render(tmp_path)
+    assert "| city, 2022-11-17 | 19 h | " in page and "| city, 2022-11-18 | 19 h | " in page
+    eps = doc["episodes"]
+
+    def mean(policy: str, key: str = "total_cost") -> float:
+        return sum(e[key] for e in eps if e["policy"] == policy) / 4
+
+    share = 100 * (mean("greedy") - mean("ia")) / (mean("greedy") - mean("greedy", "oracle_cost"))
+    assert f"| city | 19 h | 4 | {results_page.fmt(share, '{:.1f} %')} | 0.0 % |" in page
+
+
 def test_surge_report_results_page_writes_the_page_and_says_when_it_is_current(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from coordinator.cli import main
 
