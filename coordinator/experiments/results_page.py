@@ -274,7 +274,11 @@ def _by_date(doc: dict, label: str, by_date: bool) -> list[tuple[str, dict]]:
 
 @renderer("gap-closed")
 def render_gap_closed(sec: Section) -> list[str]:
-    """The share of the greedy→oracle gap in mean total cost that each of ``policies`` closes, per file and hour."""
+    """The share of the greedy→oracle gap in mean total cost that each of ``policies`` closes, per file and hour.
+
+    Each row holds the instances on which every one of ``policies`` that the
+    file has ran, so that its shares compare like with like.
+    """
     from coordinator.experiments.analysis import complete_seeds, summarize
     from coordinator.experiments.results import read_results
 
@@ -282,9 +286,16 @@ def render_gap_closed(sec: Section) -> list[str]:
     labels = sec.get("labels", sec.need("files"))
     rows = []
     for file, label in zip(sec.need("files"), labels):
-        for name, doc in _by_date(complete_seeds(read_results(sec.path(file))), label, sec.get("by_date", False)):
-            gap = {(r["hour"], r["policy"]): r["gap_closed"] for r in summarize(doc)}
-            seeds = {h: len({(e["date"], e["seed"]) for e in doc["episodes"] if e["hour"] == h}) for h in {e["hour"] for e in doc["episodes"]}}
+        doc = read_results(sec.path(file))
+        held = {e["policy"] for e in doc["episodes"]} & set(policies)
+        ran: dict[tuple, set] = {}
+        for e in doc["episodes"]:
+            ran.setdefault((e["date"], e["hour"], e["seed"]), set()).add(e["policy"])
+        common = {**doc, "episodes": [e for e in doc["episodes"] if ran[(e["date"], e["hour"], e["seed"])] >= held]}
+        for name, part in _by_date(complete_seeds(common), label, sec.get("by_date", False)):
+            gap = {(r["hour"], r["policy"]): r["gap_closed"] for r in summarize(part)}
+            eps = part["episodes"]
+            seeds = {h: len({(e["date"], e["seed"]) for e in eps if e["hour"] == h}) for h in {e["hour"] for e in eps}}
             for hour in sorted(seeds):
                 cells = [gap.get((hour, p)) for p in policies]
                 rows.append([name, f"{hour} h", str(seeds[hour])] + [fmt(None if g is None else 100 * g, "{:.1f} %") for g in cells])

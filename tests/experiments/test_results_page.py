@@ -110,6 +110,11 @@ machine = "m"
 
     share = 100 * (mean("greedy") - mean("ia")) / (mean("greedy") - mean("greedy", "oracle_cost"))
     assert f"| city | 19 h | 4 | {results_page.fmt(share, '{:.1f} %')} | 0.0 % |" in page
+    # A policy that ran on some instances only: every share of the row is over those instances.
+    part = {**doc, "episodes": [e for e in eps if not (e["policy"] == "ia" and e["seed"] == 1)]}
+    folder = tmp_path / "my-question"
+    (folder / "run.json").write_text(json.dumps(part))
+    assert "| city | 19 h | 2 |" in results_page.render(tmp_path)
 
 
 def test_surge_report_results_page_writes_the_page_and_says_when_it_is_current(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
