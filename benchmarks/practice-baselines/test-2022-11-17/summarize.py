@@ -17,16 +17,16 @@ HERE = Path(__file__).parent
 #: Each results file, by the name the summary gives it.
 FILES = {
     "synthetic, 10 seeds at 17 and 19 h": HERE / "results-synthetic.json",
-    "nyc (2018 profile level), 10 seeds at 17 and 19 h": HERE / "results-nyc.json",
     "nyc (real 2022 level), 10 seeds at 4 hours": HERE / "results-nyc-real-level.json",
     "synthetic, main table": HERE / "main-synthetic.json",
     "nyc (real 2022 level), main table": HERE / "main-nyc.json",
     "synthetic, further test dates": HERE.parent / "test-dates" / "results-synthetic.json",
     "nyc (real 2022 level), further test dates": HERE.parent / "test-dates" / "results-nyc.json",
 }
-PAIRS = (("surge", "rebalance"), ("surge", "match"), ("surge:base=rebalance,scope=map", "rebalance"),
-         ("surge:base=rebalance,scope=map", "surge"), ("surge", "ia"), ("rebalance", "match"), ("match", "ia"))
-GAP = ("surge", "rebalance", "match", "surge:base=rebalance,scope=map")
+H10, H20 = "surge:base=rebalance,scope=map", "surge:base=rebalance,scope=map,horizon=20"
+PAIRS = (("surge", "rebalance"), ("surge", "match"), (H20, "rebalance"), (H20, "match"), (H20, "surge"), (H20, H10), (H10, "rebalance"),
+         (H10, "surge"), ("surge", "ia"), ("rebalance", "match"), ("match", "ia"))
+GAP = ("surge", "rebalance", "match", H10, H20)
 
 
 def main() -> None:
