@@ -42,7 +42,13 @@ def main() -> None:
             doc = {**whole, "episodes": [e for e in whole["episodes"] if e["date"] == date]}
             hours = sorted({e["hour"] for e in doc["episodes"]})
             pairs = [p for p in (compare_pair(doc, a, b, h) for a, b in PAIRS for h in hours) if p]
-            gap = {f"{r['hour']} {r['policy']}": r["gap_closed"] for r in summarize(doc) if r["policy"] in GAP}
+            # Each share over the instances where every GAP policy of the file ran, as on the results page.
+            held = {e["policy"] for e in doc["episodes"]} & set(GAP)
+            ran: dict[tuple, set] = {}
+            for e in doc["episodes"]:
+                ran.setdefault((e["hour"], e["seed"]), set()).add(e["policy"])
+            common = {**doc, "episodes": [e for e in doc["episodes"] if ran[(e["hour"], e["seed"])] >= held]}
+            gap = {f"{r['hour']} {r['policy']}": r["gap_closed"] for r in summarize(complete_seeds(common)) if r["policy"] in GAP}
             entry["dates"][date] = {"seeds": sorted({e["seed"] for e in doc["episodes"]}), "pairs": pairs,
                                     "verdicts": against_practice(doc, "surge"), "gap_closed": gap}
             for r in pairs:
