@@ -58,6 +58,15 @@ def summarize(doc: dict) -> list[dict]:
     return out
 
 
+def common_instances(doc: dict, policies: list[str] | tuple[str, ...]) -> dict:
+    """The document restricted to the instances on which every one of ``policies`` that it holds ran, so that they compare like for like."""
+    held = {e["policy"] for e in doc["episodes"]} & set(policies)
+    ran: dict[tuple, set] = {}
+    for e in doc["episodes"]:
+        ran.setdefault((e["date"], e["hour"], e["seed"]), set()).add(e["policy"])
+    return {**doc, "episodes": [e for e in doc["episodes"] if ran[(e["date"], e["hour"], e["seed"])] >= held]}
+
+
 def complete_seeds(doc: dict) -> dict:
     """The document restricted to (date, seed) pairs finished at every hour of their date, so that hours compare like for like.
 

@@ -117,28 +117,27 @@ def bench_city(cfg: CityBench) -> int:
         data = check_scenario("nyc", cfg.data)
         builders["nyc"] = lambda: load_nyc_city(data)
     out: dict = {"schema": "surge.bench.city/1", "cpus": os.cpu_count(), "cities": {}}
-    bar = steps(2 * cfg.repeat * len(builders), "run", "bench city")
-    for name, build in builders.items():
-        times, loads = [], []
-        for _ in range(cfg.repeat):
-            t0 = time.perf_counter()
-            city = build()
-            times.append(time.perf_counter() - t0)
-            bar.update()
-        path = Path(f"/tmp/surge-bench-{name}-{os.getpid()}.npz")
-        city.save(path)
-        for _ in range(cfg.repeat):
-            t0 = time.perf_counter()
-            City.load(path)
-            loads.append(time.perf_counter() - t0)
-            bar.update()
-        size = path.stat().st_size / 2**20
-        path.unlink()
-        out["cities"][name] = {"city": city.summary(), "build_seconds": _stats(times), "load_seconds": _stats(loads), "file_mb": size}
-        s = city.summary()
-        echo(f"{name:<10} {s['intersections']:>5} nodes {s['streets']:>5} edges {s['sectors']:>3} sectors  "
-             f"build {statistics.median(times):6.2f} s (min {min(times):.2f})  load {statistics.median(loads) * 1e3:6.1f} ms  file {size:.1f} MB")
-    bar.close()
+    with steps(2 * cfg.repeat * len(builders), "run", "bench city") as bar:
+        for name, build in builders.items():
+            times, loads = [], []
+            for _ in range(cfg.repeat):
+                t0 = time.perf_counter()
+                city = build()
+                times.append(time.perf_counter() - t0)
+                bar.update()
+            path = Path(f"/tmp/surge-bench-{name}-{os.getpid()}.npz")
+            city.save(path)
+            for _ in range(cfg.repeat):
+                t0 = time.perf_counter()
+                City.load(path)
+                loads.append(time.perf_counter() - t0)
+                bar.update()
+            size = path.stat().st_size / 2**20
+            path.unlink()
+            s = city.summary()
+            out["cities"][name] = {"city": s, "build_seconds": _stats(times), "load_seconds": _stats(loads), "file_mb": size}
+            echo(f"{name:<10} {s['intersections']:>5} nodes {s['streets']:>5} edges {s['sectors']:>3} sectors  "
+                 f"build {statistics.median(times):6.2f} s (min {min(times):.2f})  load {statistics.median(loads) * 1e3:6.1f} ms  file {size:.1f} MB")
     if cfg.json:
         Path(cfg.json).write_text(json.dumps(out, indent=1))
     return 0
@@ -155,23 +154,22 @@ def bench_sim(cfg: SimBench) -> int:
     requests = episode_requests(scen.world, date, cfg.hour, 60)
     policy = make_policy("greedy", scen.city)
     act, step, total = [], [], []
-    bar = steps(cfg.episodes, "episode", "bench sim")
-    for seed in range(cfg.episodes):
-        sim = FleetSim(scen.city, requests, initial_positions(scen.city, cfg.taxis, seed))
-        policy.reset(EpisodeContext(scen.city, date, cfg.hour, 60, seed, scen.world))
-        t_ep = time.perf_counter()
-        for _ in range(60):
-            obs = sim.observe()
-            t0 = time.perf_counter()
-            u = policy.act(obs)
-            t1 = time.perf_counter()
-            sim.step(u)
-            t2 = time.perf_counter()
-            act.append(t1 - t0)
-            step.append(t2 - t1)
-        total.append(60 / (time.perf_counter() - t_ep))
-        bar.update()
-    bar.close()
+    with steps(cfg.episodes, "episode", "bench sim") as bar:
+        for seed in range(cfg.episodes):
+            sim = FleetSim(scen.city, requests, initial_positions(scen.city, cfg.taxis, seed))
+            policy.reset(EpisodeContext(scen.city, date, cfg.hour, 60, seed, scen.world))
+            t_ep = time.perf_counter()
+            for _ in range(60):
+                obs = sim.observe()
+                t0 = time.perf_counter()
+                u = policy.act(obs)
+                t1 = time.perf_counter()
+                sim.step(u)
+                t2 = time.perf_counter()
+                act.append(t1 - t0)
+                step.append(t2 - t1)
+            total.append(60 / (time.perf_counter() - t_ep))
+            bar.update()
     out = {
         "schema": "surge.bench.sim/1",
         "city": scen.city.summary(),

@@ -279,19 +279,14 @@ def render_gap_closed(sec: Section) -> list[str]:
     Each row holds the instances on which every one of ``policies`` that the
     file has ran, so that its shares compare like with like.
     """
-    from coordinator.experiments.analysis import complete_seeds, summarize
+    from coordinator.experiments.analysis import common_instances, complete_seeds, summarize
     from coordinator.experiments.results import read_results
 
     policies = sec.need("policies")
     labels = sec.get("labels", sec.need("files"))
     rows = []
     for file, label in zip(sec.need("files"), labels):
-        doc = read_results(sec.path(file))
-        held = {e["policy"] for e in doc["episodes"]} & set(policies)
-        ran: dict[tuple, set] = {}
-        for e in doc["episodes"]:
-            ran.setdefault((e["date"], e["hour"], e["seed"]), set()).add(e["policy"])
-        common = {**doc, "episodes": [e for e in doc["episodes"] if ran[(e["date"], e["hour"], e["seed"])] >= held]}
+        common = common_instances(read_results(sec.path(file)), policies)
         for name, part in _by_date(complete_seeds(common), label, sec.get("by_date", False)):
             gap = {(r["hour"], r["policy"]): r["gap_closed"] for r in summarize(part)}
             eps = part["episodes"]

@@ -9,7 +9,7 @@ import datetime as dt
 from pathlib import Path
 
 from city.fingerprint import machine
-from coordinator.experiments.analysis import compare_pair, complete_seeds, summarize
+from coordinator.experiments.analysis import common_instances, compare_pair, complete_seeds, summarize
 from coordinator.experiments.evaluate import read_results, write_json
 from coordinator.experiments.practice import against_practice
 
@@ -43,12 +43,8 @@ def main() -> None:
             hours = sorted({e["hour"] for e in doc["episodes"]})
             pairs = [p for p in (compare_pair(doc, a, b, h) for a, b in PAIRS for h in hours) if p]
             # Each share over the instances where every GAP policy of the file ran, as on the results page.
-            held = {e["policy"] for e in doc["episodes"]} & set(GAP)
-            ran: dict[tuple, set] = {}
-            for e in doc["episodes"]:
-                ran.setdefault((e["hour"], e["seed"]), set()).add(e["policy"])
-            common = {**doc, "episodes": [e for e in doc["episodes"] if ran[(e["hour"], e["seed"])] >= held]}
-            gap = {f"{r['hour']} {r['policy']}": r["gap_closed"] for r in summarize(complete_seeds(common)) if r["policy"] in GAP}
+            common = complete_seeds(common_instances(doc, GAP))
+            gap = {f"{r['hour']} {r['policy']}": r["gap_closed"] for r in summarize(common) if r["policy"] in GAP}
             entry["dates"][date] = {"seeds": sorted({e["seed"] for e in doc["episodes"]}), "pairs": pairs,
                                     "verdicts": against_practice(doc, "surge"), "gap_closed": gap}
             for r in pairs:
