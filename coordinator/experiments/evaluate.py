@@ -257,6 +257,8 @@ def load_finished(cfg: EvalConfig, path: str | Path) -> list[dict]:
         raise DataError(f"holds {kinds[not cfg.warm_start]} results, this run is {kinds[cfg.warm_start]}; "
                         "they do not mix: use another --json", path=path)
     theirs["warm_start"] = cfg.warm_start
+    if scenario_spec(cfg.scenario, cfg.data_dir, validate=False) is None:
+        theirs["data_dir"] = mine["data_dir"]  # the synthetic city reads no data: its rows do not depend on --data
     ours = demand_source(_scenario_cache(cfg).world)
     if not same_demand(recorded_source(doc), ours):
         raise DataError(f"was written with demand source {recorded_source(doc)!r}, this run has {ours!r}; use another --json", path=path)

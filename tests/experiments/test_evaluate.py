@@ -268,6 +268,17 @@ def test_a_resumed_run_of_fewer_seeds_keeps_the_others_rows(small_run: dict, tmp
     assert kept == {(0, "greedy"), (0, "ia"), (0, "oracle"), (1, "greedy"), (1, "oracle")}
 
 
+def test_a_synthetic_run_resumes_whatever_data_path_its_file_recorded(small_run: dict, tmp_path: Path) -> None:
+    """The synthetic city reads no data, so ``--data`` does not make its rows differ; a data-reading scenario's does."""
+    path = tmp_path / "run.json"
+    write_json({**small_run, "config": {**small_run["config"], "data_dir": "/elsewhere/data"}}, path)
+    cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
+    log: list[str] = []
+    resumed = evaluate(cfg, progress=log.append, checkpoint=path, resume=True)
+    assert any("2 instances done" in m for m in log)
+    assert [e["decisions_sha256"] for e in resumed["episodes"]] == [e["decisions_sha256"] for e in small_run["episodes"]]
+
+
 def test_an_interrupted_instance_resumes_from_its_finished_episodes(small_run: dict, tmp_path: Path) -> None:
     from coordinator.experiments.evaluate import _instance
     from coordinator.experiments.results import episode_dir
