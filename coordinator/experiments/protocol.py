@@ -149,8 +149,8 @@ def policy_options(run: Run, labels: list[str]) -> dict[str, dict]:
             forecast = opts.get("forecast", run.forecast if name in ("surge", "rebalance") else None)
             if forecast == "model":
                 o["model"] = str(run.model)
-            elif name in ("surge", "rebalance") and "forecast" not in opts:
-                o["forecast"] = forecast
+            if name in ("surge", "rebalance") and "forecast" not in opts and (forecast != "model" or name == "rebalance"):
+                o["forecast"] = forecast  # rebalance's own default is previous-hour: the model must be named
         if name == "oracle" and run.protocol.oracle_iters is not None:
             o["iters"] = run.protocol.oracle_iters
         if o:

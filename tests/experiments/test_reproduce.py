@@ -135,6 +135,20 @@ def test_the_protocol_plans_every_surge_label_exactly_and_resumes_the_committed_
         assert policy_options(quick, [*doc["config"]["policies"], "oracle"]) == doc["config"]["policy_options"], part
 
 
+def test_rebalance_plans_with_the_trained_model_where_surge_does_and_competes_in_the_verdict(tmp_path: Path) -> None:
+    """``rebalance``'s own default forecast is previous-hour: the protocol must name the model, or the verdict drops it."""
+    from coordinator.experiments.practice import practical_labels
+    from coordinator.experiments.protocol import QUICK, Run, policy_options
+
+    run = Run(out=tmp_path, scenario="synthetic", data=None, protocol=QUICK)
+    options = policy_options(run, ["surge", "rebalance", "match"])
+    assert options["rebalance"] == {"forecast": "model", "model": str(tmp_path / "model")}
+    assert options["surge"]["model"] == str(tmp_path / "model") and "forecast" not in options["surge"]  # its default
+    doc = {"config": {"policy_options": options},
+           "episodes": [{"policy": p, "hour": 19, "seed": 0, "date": "2022-11-17"} for p in ("surge", "rebalance", "match")]}
+    assert practical_labels(doc, "surge") == ["rebalance", "match"]
+
+
 def _row(step_policy: str, seed: int, seconds: float, machine: str | None) -> dict:
     row = {"date": "2022-11-17", "hour": 19, "seed": seed, "policy": step_policy, "plan_seconds_per_step": seconds}
     if machine:
