@@ -1,18 +1,25 @@
 #!/bin/sh
 # surge rolled out over rebalance with a 20-minute horizon (base=rebalance, scope=map, horizon=20), the setting
-# chosen on validation data (benchmarks/rollout-variants/), added to the test-date files of run.sh and
-# run-real-level.sh: the same instances, previous-hour demand for every policy; a resumed run computes only the
-# new label. The synthetic city first (10 seeds at 17 and 19 h), then the real map seed by seed at its four hours.
+# chosen on validation data (benchmarks/rollout-variants/), at the four hours of the paper's date on both maps:
+# the main table's instances and rows (borrowed from main-*.json, not run again), previous-hour demand for every
+# policy. The label's first rows, run beside the 10-minute rollout, are borrowed from results-*.json. Seeds are
+# added in rounds (ROUNDS, default "5 7 10") so that a run cut short holds whole seeds at every hour; a rerun resumes.
 set -e
 cd "$(dirname "$0")/../../.."
 OUT=benchmarks/practice-baselines/test-2022-11-17
-OLD=surge:base=rebalance,scope=map
 NEW=surge:base=rebalance,scope=map,horizon=20
-surge evaluate --scenario synthetic --data "$(cd ../shared/data && pwd)" --date 2022-11-17 --hours 17 19 --seeds 10 --taxis 100 --minutes 60 \
-    --forecast previous-hour --policies greedy ia surge match rebalance "$OLD" "$NEW" --jobs 2 --json "$OUT/results-synthetic.json" --resume \
-  > "$OUT/summary-synthetic.txt"
-for N in 3 5; do
-  surge evaluate --scenario nyc --data ../shared/data --date 2022-11-17 --hours 15 17 19 21 --seeds "$N" --taxis 100 --minutes 60 \
-      --forecast previous-hour --policies greedy ia surge match rebalance "$OLD" "$NEW" --jobs 2 --json "$OUT/results-nyc-real-level.json" --resume \
-    > "$OUT/summary-nyc-real-level.txt"
+BASE="greedy ia surge match rebalance"
+add() {  # map, seeds, results file the label's rows are borrowed from
+  surge evaluate --scenario "$1" --data ../shared/data --date 2022-11-17 --hours 15 17 19 21 --seeds "$2" --taxis 100 \
+      --minutes 60 --forecast previous-hour --policies $BASE "$NEW" --jobs 2 --json "$OUT/h20-$1.json" --resume \
+      --borrow "$3" > "$OUT/summary-h20-$1.txt"
+}
+for MAP in synthetic nyc; do
+  [ -e "$OUT/h20-$MAP.json" ] || surge evaluate --scenario "$MAP" --data ../shared/data --date 2022-11-17 --hours 15 17 19 21 \
+      --seeds 10 --taxis 100 --minutes 60 --forecast previous-hour --policies $BASE --jobs 2 --json "$OUT/h20-$MAP.json" \
+      --borrow "$OUT/main-$MAP.json" > /dev/null
+done
+for N in ${ROUNDS:-5 7 10}; do
+  add synthetic "$N" "$OUT/results-synthetic.json"
+  add nyc "$N" "$OUT/results-nyc-real-level.json"
 done

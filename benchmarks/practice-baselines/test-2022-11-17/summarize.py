@@ -20,8 +20,12 @@ FILES = {
     "nyc (real 2022 level), 10 seeds at 4 hours": HERE / "results-nyc-real-level.json",
     "synthetic, main table": HERE / "main-synthetic.json",
     "nyc (real 2022 level), main table": HERE / "main-nyc.json",
+    "synthetic, 20-minute rollout over rebalance at 4 hours": HERE / "h20-synthetic.json",
+    "nyc (real 2022 level), 20-minute rollout over rebalance at 4 hours": HERE / "h20-nyc.json",
     "synthetic, further test dates": HERE.parent / "test-dates" / "results-synthetic.json",
     "nyc (real 2022 level), further test dates": HERE.parent / "test-dates" / "results-nyc.json",
+    "synthetic, further test dates, 20-minute rollout over rebalance": HERE.parent / "test-dates" / "h20-synthetic.json",
+    "nyc (real 2022 level), further test dates, 20-minute rollout over rebalance": HERE.parent / "test-dates" / "h20-nyc.json",
 }
 H10, H20 = "surge:base=rebalance,scope=map", "surge:base=rebalance,scope=map,horizon=20"
 PAIRS = (("surge", "rebalance"), ("surge", "match"), (H20, "rebalance"), (H20, "match"), (H20, "surge"), (H20, H10), (H10, "rebalance"),
