@@ -269,7 +269,7 @@ def test_a_resumed_run_of_fewer_seeds_keeps_the_others_rows(small_run: dict, tmp
 
 
 def test_a_synthetic_run_resumes_whatever_data_path_its_file_recorded(small_run: dict, tmp_path: Path) -> None:
-    """The synthetic city reads no data, so ``--data`` does not make its rows differ; a data-reading scenario's does."""
+    """The synthetic city reads no data, so a file written with another ``--data`` path holds the same rows."""
     path = tmp_path / "run.json"
     write_json({**small_run, "config": {**small_run["config"], "data_dir": "/elsewhere/data"}}, path)
     cfg = EvalConfig(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle"], policy_options=FAST)
