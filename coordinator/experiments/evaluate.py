@@ -199,6 +199,11 @@ def _instance_task(task: tuple) -> list[dict]:
 _SAME_EPISODES = ("scenario", "data_dir", "taxis", "minutes", "world_seed")
 
 
+def _data_path_matters(cfg: EvalConfig) -> bool:
+    """Whether ``cfg``'s rows depend on its ``--data`` path: the synthetic city reads no data, so its rows do not."""
+    return scenario_spec(cfg.scenario, cfg.data_dir, validate=False) is not None
+
+
 def borrowable(cfg: EvalConfig, doc: dict) -> dict[tuple[str, int, int], dict[str, dict]]:
     """Rows of the results document ``doc`` that ``cfg`` would compute identically, by instance and policy label.
 
@@ -210,8 +215,8 @@ def borrowable(cfg: EvalConfig, doc: dict) -> dict[tuple[str, int, int], dict[st
     theirs = doc["config"]
     if any(getattr(cfg, k) != theirs.get(k) for k in _SAME_EPISODES if k != "data_dir"):
         return {}
-    if cfg.data_dir != theirs.get("data_dir") and scenario_spec(cfg.scenario, cfg.data_dir, validate=False) is not None:
-        return {}  # the synthetic city reads no data: its rows do not depend on --data
+    if cfg.data_dir != theirs.get("data_dir") and _data_path_matters(cfg):
+        return {}
     if cfg.warm_start != bool(theirs.get("warm_start", False)):
         return {}
     if not same_demand(recorded_source(doc), demand_source(_scenario_cache(cfg).world)):
@@ -257,8 +262,8 @@ def load_finished(cfg: EvalConfig, path: str | Path) -> list[dict]:
         raise DataError(f"holds {kinds[not cfg.warm_start]} results, this run is {kinds[cfg.warm_start]}; "
                         "they do not mix: use another --json", path=path)
     theirs["warm_start"] = cfg.warm_start
-    if scenario_spec(cfg.scenario, cfg.data_dir, validate=False) is None:
-        theirs["data_dir"] = mine["data_dir"]  # the synthetic city reads no data: its rows do not depend on --data
+    if not _data_path_matters(cfg):
+        theirs["data_dir"] = mine["data_dir"]
     ours = demand_source(_scenario_cache(cfg).world)
     if not same_demand(recorded_source(doc), ours):
         raise DataError(f"was written with demand source {recorded_source(doc)!r}, this run has {ours!r}; use another --json", path=path)

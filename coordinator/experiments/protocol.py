@@ -137,7 +137,7 @@ def policy_options(run: Run, labels: list[str]) -> dict[str, dict]:
     measured apart (docs/results.md).
     """
     from agents.rollout_policy import pinned_options
-    from agents.base import parse_policy
+    from agents.base import parse_policy, policy_class
 
     out = {}
     for label in labels:
@@ -149,8 +149,8 @@ def policy_options(run: Run, labels: list[str]) -> dict[str, dict]:
             forecast = opts.get("forecast", run.forecast if name in ("surge", "rebalance") else None)
             if forecast == "model":
                 o["model"] = str(run.model)
-            if name in ("surge", "rebalance") and "forecast" not in opts and (forecast != "model" or name == "rebalance"):
-                o["forecast"] = forecast  # rebalance's own default is previous-hour: the model must be named
+            if name in ("surge", "rebalance") and "forecast" not in opts and forecast != policy_class(name).defaults["forecast"]:
+                o["forecast"] = forecast  # named unless it is the policy's own default (rebalance's is previous-hour)
         if name == "oracle" and run.protocol.oracle_iters is not None:
             o["iters"] = run.protocol.oracle_iters
         if o:

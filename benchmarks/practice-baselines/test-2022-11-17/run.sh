@@ -7,7 +7,7 @@ set -e
 cd "$(dirname "$0")/../../.."
 OUT=benchmarks/practice-baselines/test-2022-11-17
 for N in 3 6 10; do
-  surge evaluate --scenario synthetic --data "$(cd ../shared/data && pwd)" --date 2022-11-17 --hours 17 19 --seeds "$N" --taxis 100 --minutes 60 \
+  surge evaluate --scenario synthetic --date 2022-11-17 --hours 17 19 --seeds "$N" --taxis 100 --minutes 60 \
     --forecast previous-hour --policies greedy ia surge match rebalance --jobs 1 --json "$OUT/results-synthetic.json" --resume \
     > "$OUT/summary-synthetic.txt"
 done
