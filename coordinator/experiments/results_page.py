@@ -218,10 +218,11 @@ def _column(sec: Section, col: dict, row: Any, label: str, file: str) -> str:
 
 @renderer("fields")
 def render_fields(sec: Section) -> list[str]:
-    """A table: one row per file (or per element of each file's ``rows`` list, filtered by ``where``).
+    """A table: one row per file (or per element of each file's ``rows`` list or mapping, filtered by ``where``).
 
     ``limit`` keeps the first rows only. ``columns`` is a list of ``{head, path, fmt, agg, divide, scale}``: ``path`` is dotted
-    (``$label`` for the file's entry in ``labels``, ``$file`` for its name); ``agg`` one of
+    (``$label`` for the file's entry in ``labels``, ``$file`` for its name, ``$key`` for a mapping
+    row's key); ``agg`` one of
     median, mean, min, max, len over a list; ``divide`` a second path the value is divided by.
     """
     cols = sec.need("columns")
@@ -230,6 +231,8 @@ def render_fields(sec: Section) -> list[str]:
     for file, label in zip(sec.need("files"), labels):
         doc = sec.load(file)
         items = lookup(doc, sec.get("rows"), sec.where) if sec.get("rows") else (doc if isinstance(doc, list) else [doc])
+        if isinstance(items, dict):
+            items = [{**value, "$key": key} for key, value in items.items()]
         for item in items:
             if any(item.get(k) != v for k, v in sec.get("where", {}).items()):
                 continue

@@ -44,6 +44,20 @@ columns = [{head = "policy", path = "policy"}, {head = "minutes", path = "second
     assert "(../benchmarks/my-question/run.json)" in page
 
 
+def test_a_mapping_of_rows_gives_a_row_per_key(tmp_path: Path) -> None:
+    _folder(tmp_path, """
+[[section]]
+title = "Error by hour"
+kind = "fields"
+files = ["run.json"]
+rows = "by_hour"
+columns = [{head = "hour", path = "$key"}, {head = "error", path = "nn.pe", fmt = "{:.1f} %"}]
+""", {"command": "c", "date": "2026-12-06", "machine": "m",
+      "by_hour": {"17": {"nn": {"pe": 11.37}}, "19": {"nn": {"pe": 14.4}}}})
+    page = results_page.render(tmp_path)
+    assert "| 17 | 11.4 % |" in page and "| 19 | 14.4 % |" in page
+
+
 def test_a_section_without_provenance_is_refused_in_one_line(tmp_path: Path) -> None:
     _folder(tmp_path, '[[section]]\ntitle = "T"\nkind = "fields"\nfiles = ["run.json"]\ncolumns = [{head = "x", path = "x"}]\n',
             {"x": 1, "date": "2026-12-06"})
