@@ -69,6 +69,10 @@ from coordinator.minute_base import MinuteBase
 
 _logger = logging.getLogger(__name__)
 
+#: How long the run's stop is put again, every ``STOP_RESEND_S``, while agents' tokens remain.
+STOP_WAIT_S = 5.0
+STOP_RESEND_S = 0.25
+
 
 def log(message: str, level: int = logging.INFO) -> None:
     """A line of the coordinator: ``surge coordinator: …``."""
@@ -275,12 +279,29 @@ class Coordinator:
                 raise
             finally:
                 if reason is not None:
-                    pub_stop.put(Stop(t=self.cfg.minutes if reason == "done" else int(self.sim.state.t), epoch=self.epoch,
-                                      reason=reason).encode())
+                    stop = Stop(t=self.cfg.minutes if reason == "done" else int(self.sim.state.t), epoch=self.epoch,
+                                reason=reason).encode()
+                    pub_stop.put(stop)
+                    self._see_agents_off(inbox, pub_stop, stop)
                 if reason not in ("done", None):
                     log(f"published stop at minute {self.sim.state.t}: {reason}")
                 for d in decls:
                     d.undeclare()
+
+    def _see_agents_off(self, inbox: Inbox, pub_stop: Any, stop: bytes) -> None:
+        """Put the stop again until every agent's token has gone (each leaves on it), for at most ``STOP_WAIT_S``.
+
+        A put just before the session closes may never leave this process, and an
+        agent that missed the stop would wait out its grace period and fail.
+        """
+        alive = set(self.health.alive)
+        deadline = time.monotonic() + STOP_WAIT_S
+        while alive and (left := deadline - time.monotonic()) > 0:
+            item = inbox.get(timeout=min(left, STOP_RESEND_S))
+            if item is None:
+                pub_stop.put(stop)
+            elif item[0] == "alive" and item[2] is False:
+                alive.discard(Keys.agent_of(item[1]))
 
     def _wait_for_agents(self, inbox: Inbox) -> None:
         deadline = time.monotonic() + self.cfg.join_timeout_s
