@@ -1,5 +1,6 @@
-"""The greedy base policy simulated inside a rollout (numba, ``cache=True``), its one-taxi
-shadow replay, and the per-taxi helpers the ``ia`` simulation (:mod:`agents._iasim`) shares.
+"""The greedy base policy simulated inside a rollout (numba, ``cache=True``) and its one-taxi shadow replay.
+
+The per-taxi searches it shares with the ``ia`` simulation (:mod:`agents._iasim`) are in :mod:`agents._search`.
 
 Conventions are those of :mod:`agents._kernels`.
 """
@@ -10,156 +11,7 @@ import numpy as np
 from numba import njit
 
 from agents._sampling import BIG_HOPS
-
-
-@njit(cache=True)
-def fill_row(v: int, near: np.ndarray, near_d: np.ndarray, e_pick: np.ndarray, dist: np.ndarray) -> None:
-    """List at ``near[v]``/``near_d[v]`` the requests nearest to node ``v`` by ``(dist[v, pickup], code)``."""
-    r0 = e_pick.shape[0]
-    kk = near.shape[1]
-    row = dist[v]
-    m = 0
-    for r in range(r0):
-        d = np.int64(row[e_pick[r]])
-        if m == kk and d >= near_d[v, kk - 1]:
-            continue
-        j = m if m < kk else kk - 1
-        while j > 0 and near_d[v, j - 1] > d:
-            near[v, j] = near[v, j - 1]
-            near_d[v, j] = near_d[v, j - 1]
-            j -= 1
-        near[v, j] = r
-        near_d[v, j] = d
-        if m < kk:
-            m += 1
-
-
-@njit(cache=True)
-def nearest_request(
-    v: int,
-    lb: int,
-    seen: int,
-    n_seen: int,
-    alive: np.ndarray,
-    act: np.ndarray,
-    n_act: int,
-    near: np.ndarray,
-    near_d: np.ndarray,
-    e_pick: np.ndarray,
-    a_pick: np.ndarray,
-    dist: np.ndarray,
-    dist_t: np.ndarray,
-) -> tuple[int, int, int]:
-    """The alive request nearest to node ``v`` by ``(distance, code)``; ``(BIG, -1)`` if none.
-
-    ``lb`` bounds from below the distance from ``v`` to the alive arrivals
-    among the first ``seen`` (negative when unknown); ``n_seen`` arrivals
-    have entered.  Arrivals are younger than every outstanding request, so
-    when the nearest outstanding request is no farther than the bound the
-    arrivals are not scanned.  Returns ``(distance, code, bound)``, the bound
-    now covering all ``n_seen`` arrivals (exact when they were scanned).
-    """
-    r0 = e_pick.shape[0]
-    best_d = BIG_HOPS
-    best_c = -1
-    kl = near.shape[1]
-    if kl > 0 and near_d[v, 0] < 0:
-        fill_row(v, near, near_d, e_pick, dist)
-    for j in range(kl):
-        r = near[v, j]
-        if alive[r]:
-            best_d = np.int64(near_d[v, j])
-            best_c = r
-            break
-    if best_c < 0 and r0 > kl:
-        row = dist[v]
-        for r in range(r0):
-            if alive[r]:
-                d = np.int64(row[e_pick[r]])
-                if d < best_d:
-                    best_d = d
-                    best_c = r
-    if lb >= 0:
-        for a in range(seen, n_seen):
-            if alive[r0 + a]:
-                lb = min(lb, np.int64(dist_t[a_pick[a], v]))
-        if lb >= best_d:
-            return best_d, best_c, lb
-    arr_d = BIG_HOPS
-    for j in range(n_act):
-        c = act[j]
-        if alive[c]:
-            d = np.int64(dist_t[a_pick[c - r0], v])
-            arr_d = min(arr_d, d)
-            if d < best_d or (d == best_d and c < best_c):
-                best_d = d
-                best_c = c
-    return best_d, best_c, arr_d
-
-
-@njit(cache=True)
-def oldest_at(
-    v: int,
-    alive: np.ndarray,
-    act: np.ndarray,
-    n_act: int,
-    near: np.ndarray,
-    near_d: np.ndarray,
-    e_pick: np.ndarray,
-    a_pick: np.ndarray,
-) -> int:
-    """Code of the oldest alive request waiting at node ``v``, or -1."""
-    r0 = e_pick.shape[0]
-    kl = near.shape[1]
-    listed = kl > 0 and near_d[v, 0] >= 0
-    j = 0
-    while listed and j < kl and near_d[v, j] == 0:
-        if alive[near[v, j]]:
-            return near[v, j]
-        j += 1
-    if (j == kl and r0 > kl) or not listed:
-        for r in range(r0):
-            if alive[r] and e_pick[r] == v:
-                return r
-    best = -1
-    for j in range(n_act):
-        c = act[j]
-        if alive[c] and a_pick[c - r0] == v and (best < 0 or c < best):
-            best = c
-    return best
-
-
-@njit(cache=True)
-def _walk(v: int, target: int, hops: int, hop_t: np.ndarray) -> int:
-    """The node ``hops`` hops from ``v`` along the shortest path to ``target`` (``hop_t[target, v]`` is v's next hop)."""
-    for _ in range(hops):
-        v = hop_t[target, v]
-    return v
-
-
-@njit(cache=True)
-def time_to_pickup(
-    v: int,
-    busy: int,
-    tail: int,
-    alive: np.ndarray,
-    act: np.ndarray,
-    n_act: int,
-    near: np.ndarray,
-    near_d: np.ndarray,
-    e_pick: np.ndarray,
-    a_pick: np.ndarray,
-    dist: np.ndarray,
-    dist_t: np.ndarray,
-) -> int:
-    """Minutes until a taxi at node ``v`` after the horizon, busy ``busy`` more minutes, can stand at the nearest waiting request; at most ``tail``.
-
-    The nearest request is taken among those still waiting at the end of the
-    horizon (tracked and sampled arrivals), from ``v`` (the taxi's node, or
-    its drop-off when busy); with none, ``tail``.
-    """
-    d, _, _ = nearest_request(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
-    return min(tail, max(0, busy) + d)
+from agents._search import nearest_request, oldest_at, time_to_pickup, walk
 
 
 @njit(cache=True)
@@ -204,7 +56,7 @@ def simulate_greedy(
 
     ``end`` values the taxis' state after the horizon: with ``tail > 0``,
     ``Σ_i (tail - a_i)²``, ``a_i`` taxi i's time to its next pickup
-    (:func:`time_to_pickup`); else with ``place`` (one value per node),
+    (:func:`agents._search.time_to_pickup`); else with ``place`` (one value per node),
     ``Σ_i place[v_i]`` over the taxis free after the horizon, ``v_i`` taxi i's
     node (a busy taxi's drop-off is the request's, not a choice); else 0.
 
@@ -254,7 +106,7 @@ def simulate_greedy(
             c = tgt[ag]
             v = tpos[ag]
             if c >= 0:
-                v = _walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(k - kanc[ag], d0[ag]), hop_t)
+                v = walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(k - kanc[ag], d0[ag]), hop_t)
             rec_pos[k] = v
             rec_tgt[k] = c
         first_new = ai
@@ -275,7 +127,7 @@ def simulate_greedy(
                 v = tpos[i]
                 if c >= 0:
                     p = e_pick[c] if c < r0 else a_pick[c - r0]
-                    v = _walk(v, p, min(k - kanc[i], d0[i]), hop_t)
+                    v = walk(v, p, min(k - kanc[i], d0[i]), hop_t)
                 if share and memo_key[v] == tick[0]:
                     d = memo_d[v]
                     c2 = memo_c[v]
@@ -306,7 +158,7 @@ def simulate_greedy(
                 rem = kanc[i] + d0[i] - k
                 ct = tgt[i]
                 pt = e_pick[ct] if ct < r0 else a_pick[ct - r0]
-                v = _walk(tpos[i], pt, k - kanc[i], hop_t)
+                v = walk(tpos[i], pt, k - kanc[i], hop_t)
                 d = np.int64(row_t[v])
                 tpos[i] = v
                 d0[i] = rem
@@ -352,7 +204,7 @@ def simulate_greedy(
             v = tpos[i]
             c = tgt[i]
             if tfree[i] <= horizon + 1 and c >= 0:
-                v = _walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(horizon + 1 - kanc[i], d0[i]), hop_t)
+                v = walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(horizon + 1 - kanc[i], d0[i]), hop_t)
             if tail > 0:
                 a = time_to_pickup(v, tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
                 spared += (tail - a) * (tail - a)
@@ -416,7 +268,7 @@ def shadow_greedy(
             return ref
         v = pos
         if tgt >= 0:
-            v = _walk(v, e_pick[tgt] if tgt < r0 else a_pick[tgt - r0], min(k - kanc, d0), hop_t)
+            v = walk(v, e_pick[tgt] if tgt < r0 else a_pick[tgt - r0], min(k - kanc, d0), hop_t)
         for f in range(c):
             if full[f] and k <= rec_t[f] and rec_pos[f, k] == v and rec_tgt[f, k] == tgt:
                 return f
@@ -440,7 +292,7 @@ def shadow_greedy(
                 if dist[pos, p] >= d0:
                     continue
                 rem = kanc + d0 - k
-                v = _walk(pos, e_pick[tgt] if tgt < r0 else a_pick[tgt - r0], k - kanc, hop_t)
+                v = walk(pos, e_pick[tgt] if tgt < r0 else a_pick[tgt - r0], k - kanc, hop_t)
                 d = np.int64(dist[v, p])
                 pos = v
                 d0 = rem

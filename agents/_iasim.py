@@ -1,7 +1,7 @@
 """Instantaneous assignment simulated inside a rollout (numba, ``cache=True``): the ``ia`` base policy.
 
-Conventions are those of :mod:`agents._kernels`; the greedy base and the
-per-taxi helpers it shares are in :mod:`agents._basesim`.
+Conventions are those of :mod:`agents._kernels`; the greedy base is in
+:mod:`agents._basesim`, and the per-taxi searches both share in :mod:`agents._search`.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from agents._basesim import nearest_request, oldest_at, time_to_pickup
+from agents._search import nearest_request, oldest_at, time_to_pickup
 
 
 @njit(cache=True, inline="always")
@@ -91,7 +91,7 @@ def simulate_ia(
     commits the globally closest (distance, taxi, request) pair, retires both,
     and repeats; each taxi's nearest free request is refreshed lazily.  ``lb[i]``
     bounds taxi ``i``'s distance to the alive arrivals among the first
-    ``seen[i]`` from below (see :func:`nearest_request`): it drops by one when the
+    ``seen[i]`` from below (see :func:`agents._search.nearest_request`): it drops by one when the
     taxi moves a hop and is unknown (-1) after a pickup.
     """
     r0 = e_pick.shape[0]

@@ -27,9 +27,11 @@ Conventions shared with :mod:`agents.rollout`:
   rollout is ``Σ_{k=0..H} g_k + g_H``: the stage costs plus the terminal cost
   (requests still outstanding at the end).
 
-The kernels live in three modules: :mod:`agents._sampling` (random numbers
-and arrivals), :mod:`agents._basesim` (the base policies) and this one (the
-per-decision structures and the rollout over samples and candidates).
+The kernels live in five modules: :mod:`agents._sampling` (random numbers
+and arrivals), :mod:`agents._basesim` and :mod:`agents._iasim` (the base
+policies), :mod:`agents._decision` (the per-decision structures: nearest-request
+lists, reach and the decision minute) and this one (the rollout over samples
+and candidates).
 """
 
 from __future__ import annotations
@@ -46,13 +48,10 @@ from numba import njit, prange
 # this import; a user's own setting wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from agents._basesim import (
-    fill_row,
-    nearest_request,
-    shadow_greedy,
-    simulate_greedy,
-)
+from agents._basesim import shadow_greedy, simulate_greedy
+from agents._decision import nearest_lists, reaches, step_zero, unfilled_lists
 from agents._iasim import simulate_ia
+from agents._search import nearest_request
 from agents._sampling import (
     BIG_HOPS,
     GREEDY,
@@ -65,94 +64,11 @@ from agents._sampling import (
     stream_key,
 )
 
-#: What :mod:`agents.rollout` uses, from here and from the two modules above.
+#: What :mod:`agents.rollout` uses, from here and from the modules above.
 __all__ = [
     "GREEDY", "IA", "LIMITED_CE", "PICKUP", "STANDARD_CE", "arrival_count", "nearest_lists", "reaches",
     "rollout_costs", "rollout_costs_serial", "sample_arrivals", "step_zero", "stream_key", "unfilled_lists",
 ]
-
-@njit(cache=True)
-def nearest_lists(dist: np.ndarray, pickups: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """For every node ``v``, the ``k`` requests nearest to it by ``(dist[v, pickup], index)``.
-
-    Returns the request indices and their distances, shape ``(n, min(k, R))`` each.
-    """
-    near, near_d = unfilled_lists(dist.shape[0], pickups.shape[0], k)
-    fill_lists(near, near_d, pickups, dist)
-    return near, near_d
-
-
-@njit(cache=True)
-def unfilled_lists(n: int, r0: int, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`nearest_lists` with no row listed yet (distance -1): a serial rollout lists the nodes it visits."""
-    kk = min(k, r0)
-    return np.empty((n, kk), dtype=np.int32), np.full((n, kk), -1, dtype=np.int16)
-
-
-@njit(cache=True)
-def fill_lists(near: np.ndarray, near_d: np.ndarray, pickups: np.ndarray, dist: np.ndarray) -> None:
-    """List every row of :func:`unfilled_lists` not listed yet."""
-    if near.shape[1] == 0:
-        return
-    for v in range(near.shape[0]):
-        if near_d[v, 0] < 0:
-            fill_row(v, near, near_d, pickups, dist)
-
-
-@njit(cache=True)
-def reaches(nodes: np.ndarray, free_from: np.ndarray, spots: np.ndarray, horizon: int, dist: np.ndarray) -> np.ndarray:
-    """Whether a taxi free from step ``free_from[i]`` at ``nodes[i]`` can stand on one of ``spots`` by step ``horizon``."""
-    out = np.zeros(nodes.shape[0], dtype=np.bool_)
-    for i in range(nodes.shape[0]):
-        slack = horizon - free_from[i]
-        if slack < 0:
-            continue
-        row = dist[nodes[i]]
-        for j in range(spots.shape[0]):
-            if row[spots[j]] <= slack:
-                out[i] = True
-                break
-    return out
-
-
-@njit(cache=True)
-def step_zero(
-    controls: np.ndarray,
-    pos: np.ndarray,
-    tau: np.ndarray,
-    dest: np.ndarray,
-    req_pick: np.ndarray,
-    req_drop: np.ndarray,
-    dist: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Apply each row of ``controls`` (one joint control per candidate) at the decision minute.
-
-    Returns, per candidate row, the alive flags of the outstanding requests,
-    and every taxi's node and first free step afterwards (busy taxis: their
-    destination and remaining trip time).
-    """
-    n_c, m = controls.shape
-    r0 = req_pick.shape[0]
-    alive = np.ones((n_c, r0), dtype=np.bool_)
-    pos1 = np.empty((n_c, m), dtype=np.int32)
-    tfree1 = np.empty((n_c, m), dtype=np.int32)
-    for c in range(n_c):
-        for i in range(m):
-            if tau[i] > 0:
-                pos1[c, i] = dest[i]
-                tfree1[c, i] = tau[i]
-                continue
-            pos1[c, i] = pos[i] if controls[c, i] == PICKUP else controls[c, i]
-            tfree1[c, i] = 1
-            if controls[c, i] == PICKUP:
-                for r in range(r0):
-                    if alive[c, r] and req_pick[r] == pos[i]:
-                        alive[c, r] = False
-                        pos1[c, i] = req_drop[r]
-                        tfree1[c, i] = 1 + max(1, np.int64(dist[pos[i], req_drop[r]]))
-                        break
-    return alive, pos1, tfree1
-
 
 @njit(cache=True)
 def _first_plans(
@@ -189,7 +105,7 @@ def _with_tail(path: int, alive: np.ndarray, n: int, spared: int, tail: int, cyc
     Past the horizon the requests still waiting (``g_H``, the alive flags of
     ``alive[:n]``) wait ``tail`` more minutes, less what the taxis serve:
     taxi i, from ``a_i`` minutes on (the time it needs to stand at the
-    nearest of them, :func:`agents._basesim._time_to_pickup`), picks up one
+    nearest of them, :func:`agents._search.time_to_pickup`), picks up one
     per ``cycle`` minutes, each sparing the rest of the tail,
     ``Σ_j (tail - a_i - j cycle) ≈ (tail - a_i)² / (2 cycle)``; ``spared`` is
     ``Σ_i (tail - a_i)²`` over the simulated taxis.  Scaled by ``2 cycle`` to
@@ -418,7 +334,7 @@ def rollout_costs(
     greedy base and ``share``, taxis searching from the same node in the same
     step share one search (:func:`simulate_greedy`).  It releases the GIL:
     agents planning side by side in threads each run a region of their own
-    (:func:`agents.rollout._serial_now`).
+    (:func:`agents.kernel_threads.serial_now`).
     """
     n_samples = s_hi - s_lo
     out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)

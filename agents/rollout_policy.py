@@ -224,7 +224,7 @@ class RolloutPolicy(Policy):
         thread of its own (the kernel releases the GIL), so the cores do not
         idle.  That one thread is a one-thread parallel region where the
         threading layer allows several at once (OpenMP, TBB), and the serial
-        kernel otherwise (:func:`agents.rollout._serial_now`).
+        kernel otherwise (:func:`agents.kernel_threads.serial_now`).
 
         Threads, not processes: the agents share the city and the minute's
         context, and only the short Python preparation of each decision is

@@ -49,23 +49,21 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from agents.base import policy_class
 from agents.cores import CoreShare
+from agents.kernel_threads import set_kernel_threads
 from agents.rollout import (
-    RolloutConfig,
     StepContext,
-    candidate_controls,
     plan_agent,
     prepare_step,
-    set_kernel_threads,
     warm_up,
 )
+from agents.rollout_inputs import candidate_controls
 from agents.sector_forecasts import AgentForecasts, needed_sectors
+from agents.taxi_join import Joining, log
 from bus.checks import (
     Bounds,
     Rejections,
     check_choice,
-    check_spec,
     check_state,
     check_stop,
     check_turn,
@@ -77,7 +75,6 @@ from bus.wire import (
     Ack,
     Control,
     ForecastMsg,
-    RunSpec,
     Snapshot,
     State,
     Stop,
@@ -86,10 +83,7 @@ from bus.wire import (
     decode,
 )
 from city.errors import ConfigError, SurgeError
-from city.fingerprint import city_sha256, code_version
 from city.logs import inherit
-
-_logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -120,12 +114,7 @@ STALL_S = 1.0
 GONE_NOTICE_S = 1.0
 
 
-def log(index: int, message: str, level: int = logging.INFO) -> None:
-    """A line of agent ``index``: ``surge agent 3: …`` (:class:`city.logs.LineFormatter`)."""
-    _logger.log(level, "%s", message, extra={"who": f"agent {index}"})
-
-
-class TaxiAgent:
+class TaxiAgent(Joining):
     """The event loop of one taxi; see the module docstring."""
 
     def __init__(self, config: AgentConfig) -> None:
@@ -205,59 +194,6 @@ class TaxiAgent:
         """Load (or build) the compiled kernels before joining, so that a fresh checkout's first turn is not late."""
         if not self.central:
             warm_up(self.city, self.rollout)
-
-    def _fetch_spec(self, session) -> RunSpec:
-        """The first acceptable answer on ``spec``; the city is built from it.  A bad answer is dropped and the agent asks again."""
-        deadline = time.monotonic() + self.cfg.join_timeout_s
-        why = "no answer"
-        while time.monotonic() < deadline:
-            for reply in session.get(self.keys.spec, timeout=2.0):
-                if reply.ok is None:
-                    continue
-                try:
-                    return self._accept_spec(reply.ok.payload.to_bytes())
-                except OtherCity:
-                    raise
-                except Exception as exc:  # a spec this agent cannot run: drop it, ask again
-                    why = str(exc)
-                    self.rejected.exception("spec", self.keys.spec, exc)
-            time.sleep(0.2)
-        raise ConfigError(f"agent {self.me}: no acceptable run spec on {self.keys.spec} within {self.cfg.join_timeout_s:.0f} s "
-                          f"(last: {why})")
-
-    def _accept_spec(self, payload: bytes) -> RunSpec:
-        settings = [f.name for f in dataclasses.fields(RolloutConfig)]
-        spec = check_spec(decode(payload, RunSpec, self.keys.spec), self.keys.spec, settings)  # type: ignore[arg-type]
-        if spec.run != self.cfg.run:
-            raise WireError(f"{self.keys.spec}: the spec of run {spec.run!r}, this agent joins {self.cfg.run!r}")
-        if spec.taxis <= self.me:
-            raise WireError(f"{self.keys.spec}: run {spec.run!r} has only {spec.taxis} taxis; this is agent {self.me}")
-        rollout = RolloutConfig(**spec.rollout)
-        where = (spec.scenario, self.cfg.data_dir or spec.data_dir)
-        if where not in self._cities:  # build each named city once, even if it fails
-            from city.scenario import load_city
-
-            try:
-                self._cities[where] = load_city(*where, mmap=True)  # the matrices shared with every agent on this host
-            except Exception as exc:
-                self._cities[where] = exc
-        city = self._cities[where]
-        if isinstance(city, Exception):
-            raise city
-        if city.summary() != spec.city:
-            raise WireError(f"{self.keys.spec}: this host's {spec.scenario} city {city.summary()} is not the coordinator's {spec.city}")
-        mine = city_sha256(city)
-        if mine != spec.city_sha256:
-            raise OtherCity(f"agent {self.me} does not join run {spec.run!r}: this host's {spec.scenario} city has content hash "
-                            f"{mine[:16]}…, the coordinator's {spec.city_sha256[:16]}… (same sizes, other streets, sectors "
-                            f"or pickup intersections; rebuild the city from the same data)")
-        if spec.code != code_version():
-            log(self.me, f"this host runs {code_version()}, the coordinator {spec.code}; decisions may differ from its reference", logging.WARNING)
-        self.city, self.rollout = city, rollout
-        self.central = policy_class(spec.policy).central
-        bounds = Bounds(taxis=spec.taxis, nodes=city.n_nodes, sectors=city.n_sectors, minutes=spec.minutes)
-        self.forecasts = AgentForecasts(city, rollout, bounds, self.rejected)
-        return spec
 
     def _snapshot(self, session) -> None:
         """Take the coordinator's snapshot: the full state, with its base controls, and the hour's forecast."""
@@ -471,10 +407,6 @@ class TaxiAgent:
         self.sent_with = committed
         out.put(self.sent.encode())
         self.decisions += 1
-
-
-class OtherCity(ConfigError):
-    """The coordinator's city is not this host's: the agent refuses to join rather than plan on another map."""
 
 
 def agent_main(config: AgentConfig) -> int:

@@ -2,7 +2,7 @@
 
 Agent ``j`` plans with the controls committed by every agent before it, but
 with pruning (a radius ``R`` in hops) its rollout looks only at the nodes
-within ``R`` of it (:func:`agents.rollout.relevant_nodes`): it simulates the
+within ``R`` of it (:func:`agents.rollout_inputs.relevant_nodes`): it simulates the
 taxis whose next position lies there and tracks the requests waiting there.
 A free predecessor ``i`` can change ``j``'s costs only through its *footprint*:
 the node it stands on, its out-neighbours (where a move takes it), and the

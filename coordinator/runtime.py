@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 
 from agents.base import Policy
-from agents.rollout import candidate_controls
+from agents.rollout_inputs import candidate_controls
 from agents.waves import Waves, plan_waves
 from bus.checks import Bounds, Rejections, check_ack, check_choice, check_control, check_forecast
 from bus.delta import state_message

@@ -15,17 +15,16 @@ from agents.forecast_providers import make_provider
 from agents.greedy import greedy_controls
 from agents.ia import ia_controls
 from agents.rollout import (
-    CE_MODES,
     DemandTables,
     RolloutConfig,
     StepContext,
     agent_costs,
-    candidate_controls,
     choose,
     plan_agent,
     prepare_step,
 )
-from agents.rollout_config import default_prune
+from agents.rollout_config import CE_MODES, default_prune
+from agents.rollout_inputs import candidate_controls
 from city.episode import run_episode
 from city.errors import ConfigError
 from city.forecast import Forecast
@@ -145,7 +144,8 @@ def test_rollout_costs_equal_exhaustive_simulation(base: str, ce: str, scope: st
 def test_candidates_still_in_play_keep_the_simulated_costs_when_the_first_are_dropped() -> None:
     """``adaptive`` drops candidates as it goes; the shadow replays then take the first candidate still
     in play as their reference, instead of simulating a dropped one for it.  Costs stay the simulator's."""
-    from agents.rollout import _decision_inputs, _run
+    from agents.rollout import _run
+    from agents.rollout_inputs import decision_inputs
 
     city = grid_city(7, 6)
     shadowed = 0
@@ -156,7 +156,7 @@ def test_candidates_still_in_play_keep_the_simulated_costs_when_the_first_are_dr
         ctx = context(city, obs, fc, horizon=4, samples=12, seed=seed)
         u = ctx.base_controls.copy()
         for agent in np.flatnonzero(obs.tau == 0):
-            inp = _decision_inputs(ctx, u[:agent], int(agent))
+            inp = decision_inputs(ctx, u[:agent], int(agent))
             ref = reference_costs(ctx, u[:agent], int(agent))
             for dropped in range(1, inp.cands.size - 1):
                 active = np.arange(inp.cands.size) >= dropped
@@ -323,15 +323,15 @@ def test_adaptive_statistics_are_numpys_to_the_last_bit() -> None:
 
 def test_a_one_thread_share_runs_a_one_thread_region_where_the_layer_allows() -> None:
     """Once the process runs OpenMP or TBB regions, a share of one runs the parallel kernel on one thread; otherwise the serial kernel."""
-    from agents.rollout import _serial_now, _threadsafe_regions
+    from agents.kernel_threads import serial_now, threadsafe_regions
 
     before = numba.get_num_threads()  # starts the threading layer
     try:
         threadsafe = numba.threading_layer() in ("omp", "tbb")
-        assert _threadsafe_regions() == threadsafe
-        assert _serial_now(False, lambda: 1) == (not threadsafe)
+        assert threadsafe_regions() == threadsafe
+        assert serial_now(False, lambda: 1) == (not threadsafe)
         assert numba.get_num_threads() == (1 if threadsafe else before)
-        assert _serial_now(True, lambda: 2) and not _serial_now(False, lambda: 2)
+        assert serial_now(True, lambda: 2) and not serial_now(False, lambda: 2)
         assert numba.get_num_threads() == min(2, numba.config.NUMBA_NUM_THREADS)
     finally:
         numba.set_num_threads(before)
@@ -339,19 +339,20 @@ def test_a_one_thread_share_runs_a_one_thread_region_where_the_layer_allows() ->
 
 def test_the_parallel_kernel_gives_one_result_in_any_number_of_groups_and_lists_rows_as_listed_up_front() -> None:
     """Each group of chunks lists nearest requests lazily in a copy of its own, merged back after the region."""
-    from agents.rollout import _decision_inputs, kernel_args
+    from agents.rollout import kernel_args
+    from agents.rollout_inputs import decision_inputs
 
     city = grid_city(7, 6)
     obs = random_state(city, np.random.default_rng(11), taxis=10, requests=9)
     ctx = context(city, obs, uniform_forecast(city, [0.6, 1.4, 0.2, 2.0]), horizon=4, samples=64, seed=3)
     u = ctx.base_controls.copy()
-    agent = next(int(a) for a in np.flatnonzero(obs.tau == 0) if _decision_inputs(ctx, u[:a], int(a)).cands.size > 1)
+    agent = next(int(a) for a in np.flatnonzero(obs.tau == 0) if decision_inputs(ctx, u[:a], int(a)).cands.size > 1)
     runs = []
     before = numba.get_num_threads()
     try:
         for threads, chunks, groups in ((1, 8, 1), (2, 16, 2), (2, 5, 3), (2, 16, 1), (2, 2, 7)):
             numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-            inp = _decision_inputs(ctx, u[:agent], agent)  # its lists fresh, no row listed
+            inp = decision_inputs(ctx, u[:agent], agent)  # its lists fresh, no row listed
             assert (inp.args[9][:, 0] < 0).all()
             out, settled = K.rollout_costs(*kernel_args(ctx, inp, 0, 64, np.ones(inp.cands.size, dtype=bool)), chunks, groups)
             runs.append((out, settled, inp.args[8], inp.args[9], inp.args[6]))

@@ -16,7 +16,8 @@ import dataclasses
 
 import numpy as np
 
-from agents.rollout import NEAR_K, agent_costs
+from agents.rollout import agent_costs
+from agents.rollout_config import NEAR_K
 from city.sim import Observation
 from tests.conftest import line_city
 from tests.agents.test_rollout import (

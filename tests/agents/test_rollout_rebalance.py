@@ -15,10 +15,10 @@ from agents.rollout import (
     RolloutConfig,
     agent_costs,
     base_controls,
-    candidate_controls,
     plan_agent,
     prepare_step,
 )
+from agents.rollout_inputs import candidate_controls
 from city.errors import ConfigError
 from city.sim import FleetSim, Requests
 from city.episode import EpisodeContext, run_episode

@@ -13,7 +13,8 @@ from agents.greedy import greedy_controls
 from agents.ia import ia_controls
 from agents._kernels import PLACE_SCALE
 from agents.place_values import place_values
-from agents.rollout import agent_costs, candidate_controls, plan_agent
+from agents.rollout import agent_costs, plan_agent
+from agents.rollout_inputs import candidate_controls
 from agents.rollout_config import RolloutConfig
 from city.errors import ConfigError
 from city.sim import FleetSim, Requests

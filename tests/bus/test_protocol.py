@@ -115,7 +115,8 @@ def test_sector_pieces_are_checked_against_the_city() -> None:
 
 
 def test_the_city_hash_tells_cities_of_the_same_size_apart(capsys: pytest.CaptureFixture) -> None:
-    from agents.taxi import AgentConfig, OtherCity, TaxiAgent
+    from agents.taxi import AgentConfig, TaxiAgent
+    from agents.taxi_join import OtherCity
     from bus.session import SessionArgs
     from bus.wire import RunSpec
     from city.fingerprint import code_version

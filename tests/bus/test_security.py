@@ -221,7 +221,7 @@ def test_an_agent_drops_what_does_not_fit_its_run_and_keeps_going(capsys: pytest
 
     import numpy as np
 
-    from agents.rollout import candidate_controls
+    from agents.rollout_inputs import candidate_controls
     from bus.delta import state_message
     from bus.forecast_messages import sector_message
     from bus.session import Inbox
@@ -296,7 +296,7 @@ def test_the_coordinator_waits_for_a_good_control_and_survives_bad_queries() -> 
     coord = Coordinator(FleetConfig(run="c", taxis=3, minutes=2, options={"forecast": "true-rate", "samples": 4}), progress=False)
     coord.obs = obs = coord.sim.observe()
     k = coord.keys
-    from agents.rollout import candidate_controls
+    from agents.rollout_inputs import candidate_controls
 
     ok = int(candidate_controls(coord.city, obs, 1)[0])
     want = {(0, 1)}
@@ -355,7 +355,7 @@ def test_an_agent_follows_the_highest_run_epoch_and_drops_a_fenced_coordinators_
     with epoch 9; epoch 5's token going does not count as the coordinator gone."""
     import numpy as np
 
-    from agents.rollout import candidate_controls
+    from agents.rollout_inputs import candidate_controls
     from bus.delta import state_message
     from bus.forecast_messages import sector_message
     from bus.session import Inbox

@@ -472,7 +472,7 @@ def _turn_rig(taxis: int, deadline_s: float):
 
 def test_a_turn_waits_for_its_live_dependencies_only_and_resends_unanswered_turns(capsys: pytest.CaptureFixture) -> None:
     """Three independent agents: agent 1 answers at once, agent 2 is suspect (its turn is sent, not waited for), agent 0 is hung."""
-    from agents.rollout import candidate_controls
+    from agents.rollout_inputs import candidate_controls
     from agents.waves import Waves
     from bus.wire import Control
     from coordinator import faults
@@ -497,7 +497,7 @@ def test_a_turn_waits_for_its_live_dependencies_only_and_resends_unanswered_turn
 
 def test_a_turn_goes_out_once_its_dependencies_commit_without_waiting_for_their_wave() -> None:
     """Agent 1 depends on agent 0 only: its turn, with 0's control, goes out before agent 2 of 0's wave answers."""
-    from agents.rollout import candidate_controls
+    from agents.rollout_inputs import candidate_controls
     from agents.waves import Waves
     from bus.wire import Control
 
