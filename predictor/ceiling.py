@@ -176,14 +176,18 @@ def read_drivers(data: YearData, events, X: np.ndarray, Y: np.ndarray, seed: int
 
 
 # ------------------------------------------------------------------ training and scoring
-def train_extra(name: str, model, data: YearData, extra: np.ndarray, checkpoint: Path | None, log: Callable[[str], None] | None):
-    """An event-sector network on base + metadata + ``extra`` (z-scored on training samples), as the metadata network was trained."""
+def train_extra(name: str, model, data: YearData, extra: np.ndarray, checkpoint: Path | None, log: Callable[[str], None] | None,
+                seed: int | None = None):
+    """An event-sector network on base + metadata + ``extra`` (z-scored on training samples), as the metadata network was trained.
+
+    ``seed`` overrides the model's training seed; with no ``extra`` columns it trains a metadata network.
+    """
     from predictor.train import TrainConfig, fit
 
     meta_net = model.meta["networks"]["metadata"]
     tr = model.meta["training"]
     cfg = TrainConfig(epochs=int(tr.get("event_epochs") or tr["epochs"]), lr=tr["lr"], weight_decay=tr["weight_decay"],
-                      batch_size=tr["batch_size"], seed=tr["seed"], patience=tr["patience"], device="cpu", eval_batch=tr.get("eval_batch", 8192))
+                      batch_size=tr["batch_size"], seed=tr["seed"] if seed is None else seed, patience=tr["patience"], device="cpu", eval_batch=tr.get("eval_batch", 8192))
     rows = {p: data.event_rows(p) for p in ("train", "val", "test")}
     mu = extra[rows["train"]].mean(axis=0)
     sd = np.maximum(extra[rows["train"]].std(axis=0), 1e-3)
@@ -257,8 +261,14 @@ def score(data: YearData, preds: dict[str, np.ndarray], part: str = "test", hour
                                           "a day keeps all its sectors and hours; differences and shares on the same resamples"}
 
 
-def measure(model, world, data: YearData, featurizer, *, n_boot: int = 1000, seed: int = 0, log: Callable[[str], None] | None = print) -> dict:
-    """Train the ceiling and reader networks beside ``model``'s and score them all on the test months; see the module notes."""
+def measure(model, world, data: YearData, featurizer, *, n_boot: int = 1000, seed: int = 0, train_seed: int | None = None,
+            log: Callable[[str], None] | None = print) -> dict:
+    """Train the ceiling and reader networks beside ``model``'s and score them all on the test months; see the module notes.
+
+    ``train_seed`` (default: the model's) seeds their training; another seed than the model's also retrains the
+    metadata network with it, so that the rows each is measured against are one seed's.  The event network stays
+    the model's.  Run with several seeds, the rows' spread is the training noise the differences must clear.
+    """
     from predictor.train import predict
 
     if "metadata" not in model.meta.get("networks", {}) or model.network("metadata") is None or model.event is None:
@@ -275,17 +285,26 @@ def measure(model, world, data: YearData, featurizer, *, n_boot: int = 1000, see
     preds = predictions(model, data, "test")
     r = data.hours("test")
     rows = data.event_rows("test")
-    nets = {}
-    for name, drivers in (("ceiling", true), ("reader", read)):
-        res, inputs = train_extra(f"text_{name}", model, data, sector_features(data.ev_hour, data.ev_sector, groups, drivers),
-                                  ck / f"text_{name}.pt" if ck is not None else None, log)
-        p = preds["metadata_nn"].copy()
+    own_seed = int(model.meta["training"]["seed"])
+    train_seed = own_seed if train_seed is None else int(train_seed)
+    tag = "" if train_seed == own_seed else f"-seed{train_seed}"
+    trained = [("ceiling", sector_features(data.ev_hour, data.ev_sector, groups, true)),
+               ("reader", sector_features(data.ev_hour, data.ev_sector, groups, read))]
+    if tag:
+        trained.insert(0, ("metadata", np.zeros((data.ev_hour.size, 0), np.float32)))
+    nets = {"metadata": {k: model.meta["networks"]["metadata"][k] for k in ("hidden", "n_in", "epochs_run", "best_epoch")}}
+    base = preds["metadata_nn"]
+    for name, extra in trained:
+        res, inputs = train_extra(f"text_{name}", model, data, extra, ck / f"text_{name}{tag}.pt" if ck is not None else None, log,
+                                  seed=train_seed)
+        p = base.copy()
         p[data.ev_hour[rows] - r.start, data.ev_sector[rows]] = model.norm.counts(predict(res.net, inputs(rows)))
         preds[f"{name}_nn"] = p
-        nets[name] = {"hidden": list(res.net.hidden), "n_in": int(res.net.n_in), **{k: v for k, v in res.to_json().items() if k not in ("losses", "val_losses")}}
+        nets[name] = {"hidden": list(res.net.hidden), "n_in": int(res.net.n_in), "seed": train_seed,
+                      **{k: v for k, v in res.to_json().items() if k not in ("losses", "val_losses")}}
     result = score(data, preds, n_boot=n_boot, seed=seed)
-    result["networks"] = {"metadata": {k: model.meta["networks"]["metadata"][k] for k in ("hidden", "n_in", "epochs_run", "best_epoch")},
-                          "event": {k: model.meta["networks"]["event"][k] for k in ("hidden", "n_in", "epochs_run", "best_epoch")}, **nets}
+    result["networks"] = {"event": {k: model.meta["networks"]["event"][k] for k in ("hidden", "n_in", "epochs_run", "best_epoch")}, **nets}
+    result["train_seed"] = train_seed
     result["reader"] = reader_info
     result["drivers"] = list(DRIVERS)
     result["features"] = list(FEATURES)

@@ -172,10 +172,14 @@ class CeilingJob:
     cache: str | None = None
     bootstrap: int = 1000
     seed: int = 0
+    #: Seed of the metadata, ceiling and reader networks' training (``None``: the model's).
+    train_seed: int | None = None
 
     def check(self) -> None:
         if self.bootstrap < 1:
             raise ConfigError("--bootstrap must be >= 1")
+        if self.train_seed is not None and self.train_seed < 0:
+            raise ConfigError(f"--train-seed must be >= 0, got {self.train_seed}")
 
     def command(self) -> str:
         parts = ["surge predictor ceiling", "--model", self.model]
@@ -183,6 +187,7 @@ class CeilingJob:
         parts += ["--data", self.data] if self.data else []
         parts += ["--bootstrap", str(self.bootstrap)] if self.bootstrap != 1000 else []
         parts += ["--seed", str(self.seed)] if self.seed else []
+        parts += ["--train-seed", str(self.train_seed)] if self.train_seed is not None else []
         return " ".join(parts)
 
 
@@ -208,7 +213,7 @@ def text_ceiling(job: CeilingJob) -> dict:
     result = {"question": "How much of what the event text could add does the event network, or a simpler reader, reach?",
               "command": job.command(), "date": dt.date.today().isoformat(), "machine": f"{os.cpu_count()}-vCPU {platform.machine()}",
               "scenario": model.meta.get("scenario") or {}, "model": str(Path(job.model)),
-              **measure(model, world, data, featurizer, n_boot=job.bootstrap, seed=job.seed, log=log_line)}
+              **measure(model, world, data, featurizer, n_boot=job.bootstrap, seed=job.seed, train_seed=job.train_seed, log=log_line)}
     print(format_table(result))
     if job.json:
         Path(job.json).parent.mkdir(parents=True, exist_ok=True)

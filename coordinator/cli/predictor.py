@@ -54,6 +54,8 @@ def add_parser(subparsers) -> None:
     c.add_argument("--cache", default=None, help="embedding cache root")
     c.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples of test days for the 95%% intervals")
     c.add_argument("--seed", type=int, default=0, help="seed of the bootstrap and of the reader's folds")
+    c.add_argument("--train-seed", type=int, default=None, help="seed of the metadata, ceiling and reader networks' training "
+                   "(default: the model's; another seed retrains the metadata network too, to measure training noise)")
     c.set_defaults(func=ceiling_main)
 
     from coordinator.cli.options import add_session_args

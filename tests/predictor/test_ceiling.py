@@ -108,3 +108,12 @@ def test_reader_trains_and_predicts_in_shape() -> None:
     assert oof.shape == (160, len(DRIVERS))
     assert not np.allclose(oof, reader.predict(X[:160]))
     assert (r2(Y[:160], oof) > 0.9).all()
+
+
+def test_a_ceiling_job_names_its_training_seed_and_refuses_a_negative_one() -> None:
+    from predictor.jobs import CeilingJob
+
+    assert CeilingJob(model="m").command() == "surge predictor ceiling --model m"
+    assert CeilingJob(model="m", train_seed=2).command() == "surge predictor ceiling --model m --train-seed 2"
+    with pytest.raises(ConfigError, match="--train-seed must be >= 0, got -1"):
+        CeilingJob(model="m", train_seed=-1).check()
