@@ -1,10 +1,10 @@
 #!/bin/sh
 # Fleet-size sweep: 100, 150 and 200 taxis on the same demand (the paper's test date, 17 and 19 h, both maps),
 # every policy with previous-hour demand, and surge also with the true rates and (synthetic city) the trained model.
-# Seeds come in rounds (1, 2, 3, 6, 10; ROUNDS overrides), each regime in turn, so that a run cut short holds whole
-# seeds in every regime.
+# Seeds come in rounds (1, 2, 3, 6, 10; ROUNDS overrides, e.g. ROUNDS="4 5 6"), each regime in turn, so that a run cut
+# short holds whole seeds in every regime.
 # The 100-taxi rows of the practice-baselines run have the same settings: they are borrowed, not run again.
-# SURGE overrides the command (default: surge), e.g. SURGE="python -m coordinator.cli".
+# SURGE overrides the command (default: surge), e.g. SURGE="python -m coordinator.cli"; JOBS the parallel episodes (default 1).
 cd "$(dirname "$0")/../.."
 OUT=benchmarks/fleet-size
 PRACTICE=benchmarks/practice-baselines/test-2022-11-17
@@ -17,7 +17,7 @@ for N in ${ROUNDS:-1 2 3 6 10}; do
       else EXTRA=""; LEND=$PRACTICE/results-nyc-real-level.json; fi
       BORROW=""; [ "$T" = 100 ] && BORROW="--borrow $LEND"
       $SURGE evaluate --scenario "$S" --data ../shared/data --date 2022-11-17 --hours 17 19 --seeds "$N" --taxis "$T" --minutes 60 \
-        --forecast previous-hour --policies greedy rebalance match surge surge:forecast=true-rate $EXTRA --jobs 1 \
+        --forecast previous-hour --policies greedy rebalance match surge surge:forecast=true-rate $EXTRA --jobs "${JOBS:-1}" \
         --json "$OUT/results-$S-$T.json" --resume $BORROW > "$OUT/summary-$S-$T.txt" 2>> "$OUT/run.log"
     done
   done
