@@ -15,7 +15,7 @@ agent rejoins from a snapshot.  With every agent answering, the decisions are
 those of the in-process policy of the same seed, bit for bit
 (``tests/coordinator/test_runtime.py``).
 
-It survives faults (``tests/coordinator/test_faults.py``): it holds a liveliness token
+It survives faults (``tests/coordinator/test_faults.py``, ``test_recovery.py``): it holds a liveliness token
 that agents watch, publishes :class:`~bus.wire.Stop` with the reason on
 every way out, checkpoints each minute to its run directory
 (:mod:`coordinator.checkpoint`, ``--resume``), and tells a partition from
@@ -289,13 +289,16 @@ class Coordinator(TurnTaking):
         agent that missed the stop would wait out its grace period and fail.
         """
         alive = set(self.health.alive)
-        deadline = time.monotonic() + STOP_WAIT_S
-        while alive and (left := deadline - time.monotonic()) > 0:
-            item = inbox.get(timeout=min(left, STOP_RESEND_S))
-            if item is None:
-                pub_stop.put(stop)
-            elif item[0] == "alive" and item[2] is False:
+        now = time.monotonic()
+        deadline, resend = now + STOP_WAIT_S, now + STOP_RESEND_S
+        while alive and (left := deadline - now) > 0:
+            item = inbox.get(timeout=max(0.0, min(left, resend - now)))
+            if item is not None and item[0] == "alive" and item[2] is False:
                 alive.discard(Keys.agent_of(item[1]))
+            now = time.monotonic()
+            if now >= resend:  # on a clock, so that a steady stream of other messages cannot hold the re-send back
+                pub_stop.put(stop)
+                resend = now + STOP_RESEND_S
 
     def _wait_for_agents(self, inbox: Inbox) -> None:
         deadline = time.monotonic() + self.cfg.join_timeout_s

@@ -1,6 +1,6 @@
 #!/bin/sh
 # Fleet-size sweep: 100, 150 and 200 taxis on the same demand (the paper's test date, 17 and 19 h, both maps),
-# every policy with previous-hour demand, and surge also with the true rates and (synthetic city) the trained model.
+# every policy with previous-hour demand, and surge also with the true rates and the trained model of each map.
 # Seeds come in rounds (1, 2, 3, 6, 10; ROUNDS overrides, e.g. ROUNDS="4 5 6"), each regime in turn, so that a run cut
 # short holds whole seeds in every regime.
 # The 100-taxi rows of the practice-baselines run have the same settings: they are borrowed, not run again.
@@ -9,12 +9,13 @@ cd "$(dirname "$0")/../.."
 OUT=benchmarks/fleet-size
 PRACTICE=benchmarks/practice-baselines/test-2022-11-17
 MODEL=benchmarks/paper-protocol/full-synthetic/model
+MODEL_NYC=benchmarks/fleet-size/nyc-model
 SURGE=${SURGE:-surge}
 for N in ${ROUNDS:-1 2 3 6 10}; do
   for T in 150 200 100; do
     for S in synthetic nyc; do
       if [ "$S" = synthetic ]; then EXTRA="surge:forecast=model,model=$MODEL"; LEND=$PRACTICE/results-synthetic.json
-      else EXTRA=""; LEND=$PRACTICE/results-nyc-real-level.json; fi
+      else EXTRA="surge:forecast=model,model=$MODEL_NYC"; LEND=$PRACTICE/results-nyc-real-level.json; fi
       BORROW=""; [ "$T" = 100 ] && BORROW="--borrow $LEND"
       $SURGE evaluate --scenario "$S" --data ../shared/data --date 2022-11-17 --hours 17 19 --seeds "$N" --taxis "$T" --minutes 60 \
         --forecast previous-hour --policies greedy rebalance match surge surge:forecast=true-rate $EXTRA --jobs "${JOBS:-1}" \

@@ -113,3 +113,34 @@ def test_a_turn_goes_out_once_its_dependencies_commit_without_waiting_for_their_
     assert turn1.deps.tolist() == [0] and turn1.controls.tolist() == [pick[0]]
     assert u.tolist() == [pick[0], pick[1], pick[2]] and coord.tally.fallbacks.sum() == 0
     assert [w["agents"] for w in out] == [[0, 2], [1]] and all(w["seconds"] >= 0 for w in out)
+
+
+def test_the_stop_is_put_again_on_a_clock_while_other_messages_keep_coming() -> None:
+    import threading
+
+    from coordinator.run_config import FleetConfig
+    from coordinator.runtime import STOP_RESEND_S, Coordinator
+
+    coord = Coordinator(FleetConfig(run="w", taxis=2, minutes=1, options={"forecast": "true-rate"}), progress=False)
+    coord.health.alive = {0, 1}
+    inbox, puts = Inbox(), []
+
+    class Pub:
+        def put(self, payload: bytes) -> None:
+            puts.append(time.monotonic())
+
+    def chatter() -> None:  # a message every 20 ms, never a quiet spell of STOP_RESEND_S, then both agents leave
+        end = time.monotonic() + 6 * STOP_RESEND_S
+        while time.monotonic() < end:
+            inbox.put("state", coord.keys.state, b"")
+            time.sleep(0.02)
+        for a in (0, 1):
+            inbox.put("alive", coord.keys.alive(a), False)
+
+    feeder = threading.Thread(target=chatter)
+    t0 = time.monotonic()
+    feeder.start()
+    coord._see_agents_off(inbox, Pub(), b"stop")
+    feeder.join()
+    assert 4 <= len(puts) <= 8 and puts[0] - t0 < 2 * STOP_RESEND_S
+    assert time.monotonic() - t0 < 10 * STOP_RESEND_S  # it left once both tokens had gone
