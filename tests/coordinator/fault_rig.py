@@ -159,3 +159,10 @@ def next_turn(turns: queue.SimpleQueue, at_least: int, timeout: float = 120) -> 
         t = turns.get(timeout=max(0.1, deadline - time.monotonic()))
         if t >= at_least:
             return t
+
+
+def kill_all(*procs: Logged | None) -> None:
+    """Kill every process still running (a test's ``finally``); ``None`` stands for one never started."""
+    for p in procs:
+        if p is not None:
+            p.kill()

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.coordinator.fault_rig import CLI, Bus, Logged, coordinator, next_turn
+from tests.coordinator.fault_rig import CLI, Bus, Logged, coordinator, kill_all, next_turn
 
 pytestmark = pytest.mark.usefixtures("compiled_kernels")
 
@@ -47,9 +47,7 @@ def test_router_restart_and_coordinator_resume_keep_the_uninterrupted_decisions(
         assert resumed.finish(180) == 0, resumed.text
         assert [a.finish(60) for a in agents] == [0, 0, 0], "\n".join(a.text for a in agents)
     finally:
-        for p in (coord, resumed, *agents):
-            if p is not None:
-                p.kill()
+        kill_all(coord, resumed, *agents)
     result = json.loads(out.read_text())
     assert "resuming run 'faults' at minute" in resumed.text and result["resumed_at_minute"] >= 8
     assert all("the coordinator is back" in a.text for a in agents)
@@ -110,8 +108,7 @@ def test_a_killed_agent_rejoins_and_a_hung_agent_costs_one_deadline(bus: Bus, tm
     finally:
         for w in watch.values():
             w.close()
-        for p in (coord, *agents.values()):
-            p.kill()
+        kill_all(coord, *agents.values())
     result = json.loads(out.read_text())
     fallen = {a: [t for t, b in result["fallback_turns"] if b == a] for a in range(3)}
     assert fallen[0] == [] and result["fallbacks_per_agent"] == [len(fallen[a]) for a in range(3)]
@@ -146,8 +143,7 @@ def test_an_agent_back_before_its_departure_settles_gets_the_base_control_at_onc
         token.undeclare()
     finally:
         watch.close()
-        for p in (coord, *agents):
-            p.kill()
+        kill_all(coord, *agents)
     lines = coord.lines
     assert lines.index(coord.wait_for("agent 1 left")) < lines.index(coord.wait_for("agent 1 is back")) < lines.index(gone)
     assert "silent for" not in coord.text
@@ -167,8 +163,7 @@ def test_a_stopped_coordinator_stops_its_agents_within_the_grace_period(bus: Bus
             took = time.monotonic() - t0
             rc = coord.finish(30)
         finally:
-            for p in (coord, *agents):
-                p.kill()
+            kill_all(coord, *agents)
         if sig == signal.SIGTERM:
             assert rc == 143 and "published stop at minute" in coord.text
             assert codes == [0, 0, 0] and took < grace

@@ -18,7 +18,7 @@ import pytest
 from bus.session import Inbox
 from city.errors import DataError
 from coordinator.faults import PartitionError
-from tests.coordinator.fault_rig import CLI, Bus, Logged, coordinator
+from tests.coordinator.fault_rig import CLI, Bus, Logged, coordinator, kill_all
 
 pytestmark = pytest.mark.usefixtures("compiled_kernels")
 
@@ -138,9 +138,7 @@ def test_takeover_fences_the_first_coordinator_and_keeps_the_uninterrupted_decis
         assert second.finish(300) == 0, second.text
         assert [a.finish(60) for a in agents] == [0, 0, 0], "\n".join(a.text for a in agents)
     finally:
-        for p in (first, second, *agents):
-            if p is not None:
-                p.kill()
+        kill_all(first, second, *agents)
     assert "taking run 'fence' over from the coordinator of run epoch" in second.text
     assert "was taken over by the coordinator of run epoch" in first.text and "published stop" not in first.text
     assert all("took the run over from epoch" in a.text for a in agents)
