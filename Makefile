@@ -31,7 +31,7 @@ bench: $(STAMP)
 	mkdir -p bench-results
 	$(VENV)/bin/surge bench city --data ../shared/data --json bench-results/city.json
 	$(VENV)/bin/surge bench sim --json bench-results/sim.json
-	$(VENV)/bin/surge bench plan --scenario nyc --data ../shared/data --taxis 100 --horizon 10 --samples 1000 --steps 5 --policies surge surge:adaptive=none,cap=none garces2023 --forecast true-rate --json bench-results/plan.json
+	$(VENV)/bin/surge bench plan --scenario nyc --data ../shared/data --taxis 100 --steps 5 --policies surge surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2 garces2023 --forecast true-rate --json bench-results/plan.json
 
 clean:
 	rm -rf $(VENV) bench-results

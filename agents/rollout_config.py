@@ -50,13 +50,13 @@ class RolloutConfig:
         Leave out taxis and requests farther than this many hops (either
         direction) from the deciding agent; ``None`` simulates the whole map.
     cap : int or None
-        Approximation, off here (the ``surge`` policy's default is 24): simulate at most this many taxis, the
+        Approximation, off here (the ``surge`` policy's default is 12): simulate at most this many taxis, the
         agent and its nearest (in hops, either direction), besides the radius.
         With the greedy base only taxis that can reach a possible pickup within
         the horizon are ranked (the others never change a cost), so the exact
         shortcuts stay exact under the cap.
     adaptive : float or None
-        Approximation, off here (the ``surge`` policy's default is 2, in batches of 50): run the samples in batches of
+        Approximation, off here (the ``surge`` policy's default is 1, in batches of 50): run the samples in batches of
         ``batch`` and drop a candidate once its mean paired difference from
         the best candidate (common random numbers) exceeds ``adaptive``
         standard errors; the decision is the best of those left.

@@ -3,16 +3,17 @@
 Both plan every free taxi with :func:`agents.rollout.plan_agent`; they differ
 in their defaults.
 
-``surge`` (the paper's method)
-    Greedy base policy; limited certainty equivalence (η rounded when at
-    least one request per minute, a Bernoulli draw below); requests sampled
-    only in the agent's sector and its adjacent sectors; forecast ``model``
-    by default.  It plans with two approximations by default (``adaptive=2``
-    in batches of 50, ``cap=24``): measured free in total cost at 100 and
-    1,000 taxis, and 4–8 times faster (benchmarks/approximation-cost/,
-    benchmarks/planning-speed/).
-    ``adaptive=none,cap=none`` (:data:`EXACT`) plans exactly, as the paper
-    does; ``surge reproduce`` plans so.
+``surge`` (the paper's method, planned further)
+    Rolled out over ``rebalance`` (optimal matching plus forecast-driven
+    rebalancing) for 20 minutes, requests sampled over the whole map, limited
+    certainty equivalence (η rounded when at least one request per minute, a
+    Bernoulli draw below), forecast ``model`` by default; planned with three
+    approximations (200 samples, ``cap=12``, ``adaptive=1`` in batches of
+    50).  Chosen on validation data over the paper's configuration, which it
+    beats on every validation and test instance (benchmarks/rollout-variants/,
+    benchmarks/practice-baselines/).  :data:`PAPER` is the paper's
+    configuration (greedy base, H = 10, local sampling, 1,000 samples,
+    planned exactly); ``surge reproduce`` plans so.
 ``garces2023`` (Garces et al. 2023, the paper's baseline 3)
     Instantaneous-assignment base policy; standard certainty equivalence;
     requests sampled over the whole map; forecast ``previous-hour``.
@@ -269,18 +270,28 @@ class RolloutPolicy(Policy):
                         heapq.heappush(ready, b)
 
 
-#: The approximation options of exact planning: what ``surge`` planned with by default until 2026-12-06, and
-#: ``garces2023`` still does.  With them a ``surge`` label plans as the paper does.
+#: The approximation options of exact planning, as ``garces2023`` plans (and ``surge`` in a results file that
+#: records no ``surge_defaults``, written by surge 0.1).
 EXACT: dict[str, Any] = {"cap": None, "adaptive": None, "batch": 100}
+
+#: The paper's configuration besides the approximations: the greedy rollout.  A results file that records only
+#: the approximations among ``surge``'s defaults planned with it.
+GREEDY_ROLLOUT: dict[str, Any] = {"horizon": 10, "samples": 1000, "base": "greedy", "scope": "local"}
+
+#: The paper's method as the paper plans it: with these options a ``surge`` label plans as the paper does.
+PAPER: dict[str, Any] = {**GREEDY_ROLLOUT, **EXACT}
 
 
 @register
 class Surge(RolloutPolicy):
-    """The paper's method: greedy base, limited CE, local sampling, event-informed forecast; planned with approximations measured free."""
+    """The paper's method rolled out over ``rebalance`` for 20 minutes; limited CE, whole-map sampling, event-informed forecast.
+
+    The paper's own configuration is :data:`PAPER`.
+    """
 
     name = "surge"
-    defaults: ClassVar[dict[str, Any]] = {"forecast": "model", "horizon": 10, "samples": 1000, "base": "greedy", "scope": "local", "ce": "limited",
-                                          "cap": 24, "adaptive": 2.0, "batch": 50}
+    defaults: ClassVar[dict[str, Any]] = {"forecast": "model", "horizon": 20, "samples": 200, "base": "rebalance", "scope": "map",
+                                          "ce": "limited", "cap": 12, "adaptive": 1.0, "batch": 50}
 
 
 @register
@@ -292,12 +303,14 @@ class Garces2023(RolloutPolicy):
                                           **EXACT}
 
 
-def pinned_options(label: str, values: dict[str, Any] = EXACT) -> dict[str, Any]:
-    """Those of ``values`` that ``label`` (``"surge:cap=12"``) does not set itself, for a ``surge`` label; none for any other.
+def pinned_options(label: str, values: dict[str, Any] = PAPER) -> dict[str, Any]:
+    """Those of ``values`` that ``label`` (``"surge:cap=12"``) does not set itself and ``surge`` does not default to, for a ``surge`` label; none for any other.
 
-    Added to a label's options, the default :data:`EXACT` make it plan
-    exactly, as ``surge`` did by default until 2026-12-06, whatever its
-    default is now.
+    Added to a label's options, the default :data:`PAPER` make it plan as
+    the paper does (``surge:base=ia`` then varies the paper's method),
+    whatever ``surge``'s defaults are now.
     """
     name, options = split_policy(label)
-    return {k: v for k, v in values.items() if k not in options} if name == Surge.name else {}
+    if name != Surge.name:
+        return {}
+    return {k: v for k, v in values.items() if k not in options and Surge.defaults.get(k) != v}

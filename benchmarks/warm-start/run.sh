@@ -2,14 +2,18 @@
 # The warm-start protocol on the paper's test date: each policy starts hour h where it left the fleet after driving
 # hour h-1 from the seed's random start. 17 and 19 h, 100 taxis, both maps, previous-hour demand for every policy.
 # Seeds come in rounds (1, 3, 6, 10) on both maps in turn, so that a run cut short holds whole seeds on both.
-# SURGE overrides the command (default: surge), e.g. SURGE="python -m coordinator.cli".
+# SURGE overrides the command (default: surge), e.g. SURGE="python -m coordinator.cli". A bare `surge` in these files is the
+# greedy rollout (they record it as surge's defaults); FAST is today's default surge, named in full.
+# Today's `surge` will not resume these files (one line names both settings): rerun into an empty folder with
+# surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2 in place of the bare `surge`.
 cd "$(dirname "$0")/../.."
 OUT=benchmarks/warm-start
 SURGE=${SURGE:-surge}
+FAST=surge:base=rebalance,scope=map,horizon=20,samples=200,cap=12,adaptive=1
 for N in 1 3 6 10; do
   for S in synthetic nyc; do
     $SURGE evaluate --warm-start --scenario "$S" --data ../shared/data --date 2022-11-17 --hours 17 19 --seeds "$N" --taxis 100 \
-      --minutes 60 --forecast previous-hour --policies greedy rebalance match surge --jobs 1 \
+      --minutes 60 --forecast previous-hour --policies greedy rebalance match surge "$FAST" --jobs 2 \
       --json "$OUT/results-$S.json" --resume > "$OUT/summary-$S.txt" 2>> "$OUT/run.log"
   done
 done

@@ -53,8 +53,8 @@ class PlanBench:
     date: str = "2022-11-17"
     hour: int = 19
     taxis: int = 100
-    horizon: int = 10
-    samples: int = 1000
+    horizon: int | None = None
+    samples: int | None = None
     steps: int = 5
     warmup: int = 25
     seed: int = 0
@@ -319,7 +319,9 @@ def bench_plan(cfg: PlanBench) -> int:
             out["city"] = res.pop("city")
             out["demand_source"] = res.pop("demand_source")
             out["policies"][name] = res
-            echo(f"{name} ({res['approximations']}): free taxis {res['free_taxis']}, critical path {res['critical_path']} waves, "
+            plan = res["rollout"]
+            what = f"{plan['base']} base, H={plan['horizon']}, {plan['samples']} samples, {res['approximations']}" if plan else "central"
+            echo(f"{name} ({what}): free taxis {res['free_taxis']}, critical path {res['critical_path']} waves, "
                  f"peak RSS {res['peak_rss_mb']:.0f} MB, first call {res['first_call_seconds']:.2f} s")
             for v, rec in res["variants"].items():
                 st = rec["plan_seconds_per_step"]
@@ -338,7 +340,8 @@ def bench_plan(cfg: PlanBench) -> int:
             print(f"garces2023 / {label} median time ratio: {ratio:.2f} ({label}: {pol[label]['approximations']}; "
                   f"garces2023: {pol['garces2023']['approximations']})")
     c = out["city"]
-    print(f"{cfg.scenario}: {c['intersections']} intersections, {cfg.taxis} taxis, H={cfg.horizon}, {cfg.samples} samples, "
+    flags = "".join(f", {k} {v} for every rollout policy" for k, v in (("H", cfg.horizon), ("samples", cfg.samples)) if v is not None)
+    print(f"{cfg.scenario}: {c['intersections']} intersections, {cfg.taxis} taxis{flags}, "
           f"{cfg.date} {cfg.hour}:00 + {cfg.warmup} min, {os.cpu_count()} cpus, {cfg.workers} planning worker(s)")
     if cfg.json:
         Path(cfg.json).write_text(json.dumps(out, indent=1))

@@ -131,10 +131,11 @@ def policy_options(run: Run, labels: list[str]) -> dict[str, dict]:
     ``rebalance`` plans with ``surge``'s forecast where its label names none,
     so that ``surge`` meets the practical baseline with the same information.
 
-    Every ``surge`` label plans exactly (:data:`agents.rollout_policy.EXACT`),
-    as the paper's method does and as ``garces2023`` does, so that the
-    comparisons are like with like; ``surge``'s default approximations are
-    measured apart (docs/results.md).
+    Every ``surge`` label plans in the paper's configuration where it does
+    not set an option (:data:`agents.rollout_policy.PAPER`: greedy base,
+    H = 10, local sampling, planned exactly, as ``garces2023`` is), so that
+    the protocol reproduces the paper; ``surge``'s defaults are measured
+    apart (docs/results.md).
     """
     from agents.rollout_policy import pinned_options
     from agents.base import parse_policy, policy_class

@@ -93,26 +93,31 @@ def format_regimes(rows: list[dict]) -> str:
 
 
 def plot_regimes(rows: list[dict], path: str | Path, title: str = "") -> None:
-    """Per map (columns): ``surge`` − strongest baseline against fleet size (top), and each forecast − the policy's (bottom), 95 % CIs."""
+    """Per map (columns): ``surge`` − strongest baseline against fleet size (top), and each forecast − the policy's (bottom), 95 % CIs.
+
+    Without another forecast in ``rows`` the figure is the top row alone.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     maps = list(dict.fromkeys(r["scenario"] for r in rows))
-    fig, axes = plt.subplots(2, len(maps), figsize=(5.2 * len(maps), 7.0), dpi=110, squeeze=False, sharex=True)
+    n_rows = 2 if any(r["forecast_differences"] for r in rows) else 1
+    fig, axes = plt.subplots(n_rows, len(maps), figsize=(5.2 * len(maps), 3.5 * n_rows), dpi=110, squeeze=False, sharex=True)
     for j, m in enumerate(maps):
         mine = [r for r in rows if r["scenario"] == m]
         for k, h in enumerate(sorted({r["hour"] for r in mine})):
             at = sorted((r for r in mine if r["hour"] == h), key=lambda r: r["taxis"])
             _errorbars(axes[0, j], at, f"{h} h", k)
-            for i, f in enumerate(dict.fromkeys(d["forecast"] for r in at for d in r["forecast_differences"])):
+            for i, f in enumerate(dict.fromkeys(d["forecast"] for r in at for d in r["forecast_differences"]) if n_rows > 1 else ()):
                 pts = [{"taxis": r["taxis"], **d} for r in at for d in r["forecast_differences"] if d["forecast"] == f]
                 _errorbars(axes[1, j], pts, f"{f} − {at[0]['forecast']}, {h} h", 2 * k + i, marker="os^v"[i % 4])
         axes[0, j].set_title(m)
         axes[0, j].set_ylabel("surge − strongest practical baseline\n(total cost, mean and 95 % CI)")
-        axes[1, j].set_ylabel("surge with another forecast − surge\n(total cost, mean and 95 % CI)")
-        axes[1, j].set_xlabel("taxis")
+        if n_rows > 1:
+            axes[1, j].set_ylabel("surge with another forecast − surge\n(total cost, mean and 95 % CI)")
+        axes[-1, j].set_xlabel("taxis")
         for ax in axes[:, j]:
             ax.axhline(0, color="black", linewidth=0.8)
             ax.grid(alpha=0.3)
@@ -139,7 +144,10 @@ def _errorbars(ax, pts: list[dict], label: str, k: int, marker: str = "o") -> No
 
 @renderer("regimes")
 def render_regimes(sec: Section) -> list[str]:
-    """The results page's table of ``surge report --regimes`` JSON files: one row per regime, a column per other forecast."""
+    """The results page's table of ``surge report --regimes`` JSON files: one row per regime, a column per other forecast.
+
+    ``name``, when given, is what the table calls the paired policy (default: `` `surge` ``).
+    """
     rows = [r for f in sec.need("files") if f.endswith(".json") for r in sec.load(f)["regimes"]]
     forecasts = list(dict.fromkeys(d["forecast"] for r in rows for d in r["forecast_differences"]))
     base = rows[0]["forecast"] if rows else ""
@@ -152,6 +160,7 @@ def render_regimes(sec: Section) -> list[str]:
                     f"{r['wins']} / {r['n']}", fmt(r["beats"]), gap,
                     *(fmt(by[f]["cost_difference"], "{:+.1f}") + " " + fmt(by[f]["ci95"], "{:+.1f}") + f", {by[f]['wins']} / {by[f]['n']}"
                       if f in by else "—" for f in forecasts)])
-    head = ["map", "start", "hour", "taxis", "instances", "strongest baseline", "`surge` − it, 95 % CI", "`surge` wins", "beats it",
-            "gap closed: `surge` / it", *(f"`surge` {f} − {base}, 95 % CI, wins" for f in forecasts)]
+    name = sec.get("name", "`surge`")
+    head = ["map", "start", "hour", "taxis", "instances", "strongest baseline", f"{name} − it, 95 % CI", f"{name} wins", "beats it",
+            f"gap closed: {name} / it", *(f"{name} {f} − {base}, 95 % CI, wins" for f in forecasts)]
     return table(head, out)

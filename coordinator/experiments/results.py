@@ -87,11 +87,15 @@ def mistyped_field(ep: dict) -> str | None:
     return next((f for f, (types, _) in EPISODE_TYPES.items() if f in ep and (isinstance(ep[f], bool) or not isinstance(ep[f], types))), None)
 
 
-def surge_defaults() -> dict:
-    """The approximation options a ``surge`` label plans with when it does not set them; results files record them."""
-    from agents.rollout_policy import EXACT, Surge
+#: The planner options whose ``surge`` defaults a results file records (``surge_defaults``).
+RECORDED_DEFAULTS = ("horizon", "samples", "base", "scope", "cap", "adaptive", "batch")
 
-    return {k: Surge.defaults[k] for k in EXACT}
+
+def surge_defaults() -> dict:
+    """The planner options a ``surge`` label plans with when it does not set them; results files record them."""
+    from agents.rollout_policy import Surge
+
+    return {k: Surge.defaults[k] for k in RECORDED_DEFAULTS}
 
 
 def pin_surge_defaults(config: dict, recorded: dict | None) -> dict:
@@ -99,10 +103,13 @@ def pin_surge_defaults(config: dict, recorded: dict | None) -> dict:
 
     ``recorded`` is the file's ``surge_defaults``; ``None`` (a file written
     before the field) means exact planning, :data:`agents.rollout_policy.EXACT`.
+    An option it does not record has the value of
+    :data:`agents.rollout_policy.GREEDY_ROLLOUT`: a file that records only
+    the approximations planned the greedy rollout.
     """
-    from agents.rollout_policy import EXACT, pinned_options
+    from agents.rollout_policy import EXACT, GREEDY_ROLLOUT, pinned_options
 
-    recorded = EXACT if recorded is None else recorded
+    recorded = {**GREEDY_ROLLOUT, **(EXACT if recorded is None else recorded)}
     if recorded == surge_defaults():
         return config
     options = dict(config.get("policy_options", {}))

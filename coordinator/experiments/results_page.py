@@ -22,7 +22,8 @@ Kinds: ``fields`` (a table of values read from the files by dotted paths; no
 code needed), ``paired-results`` (paired comparisons of ``surge.results/1``
 files), ``paired-runs`` (two sets of runs compared minute by minute), ``gap-closed``
 (the share of the greedy→oracle gap each policy closes; both it and
-``paired-results`` split a file by date with ``by_date = true``) and
+``paired-results`` split a file by date with ``by_date = true``, and ``name``
+or ``names`` call a policy something other than its label) and
 ``cluster-rounds`` (timed rounds of one sweep two ways). A new kind is a
 function ``(Section) -> list[str]`` of Markdown lines registered with
 :func:`renderer`, in any module a ``page.toml`` names.
@@ -50,7 +51,11 @@ HEADER = ["# Results", "",
           "Current figures only, generated from the committed result files by `surge report --results-page`;",
           "do not edit this page by hand. Each section names its command, the date it ran, the machine kind",
           "and its result files. Timings compare only within a section (one machine); costs, decisions and",
-          "percent errors do not depend on the machine.", ""]
+          "percent errors do not depend on the machine.", "",
+          "`surge` is the default rollout (over `rebalance`, 20 minutes, 200 samples, `cap=12`, `adaptive=1`).",
+          "A results file records the `surge` defaults it ran with and reads with them: where they were those",
+          "of the *greedy rollout* (the paper's configuration: greedy base, 10 minutes, local sampling, 1,000",
+          "samples, `cap=24`, `adaptive=2`), a `surge` label names what it changes from the greedy rollout.", ""]
 
 
 def renderer(kind: str) -> Callable[[Callable[[Section], list[str]]], Callable[[Section], list[str]]]:
@@ -244,7 +249,11 @@ def render_fields(sec: Section) -> list[str]:
 
 @renderer("paired-results")
 def render_paired_results(sec: Section) -> list[str]:
-    """``policy`` against ``against`` per hour in ``surge.results/1`` files, instance by instance, with 95 % CIs."""
+    """``policy`` against ``against`` per hour in ``surge.results/1`` files, instance by instance, with 95 % CIs.
+
+    ``name``, when given, is what the table calls ``policy`` (a label whose meaning
+    the file pins, such as a bare ``surge`` written under other defaults).
+    """
     from coordinator.experiments.analysis import compare_pair, complete_seeds
     from coordinator.experiments.results import read_results
 
@@ -262,7 +271,7 @@ def render_paired_results(sec: Section) -> list[str]:
                              fmt(r["ci95"], "{:+.1f}"), fmt(100 * r["relative_difference"], "{:+.1f} %"),
                              fmt(100 * overhead if overhead is not None else None, "{:+.1f} %"),
                              fmt(100 * r["served_change"], "{:+.1f} %")])
-    head = ["", "hour", "`" + policy + "` wins", "mean difference", "95 % CI", "relative",
+    head = ["", "hour", sec.get("name", "`" + policy + "`") + " wins", "mean difference", "95 % CI", "relative",
             "wait overhead per served", "served"]
     return table(head, rows)
 
@@ -280,7 +289,8 @@ def render_gap_closed(sec: Section) -> list[str]:
     """The share of the greedy→oracle gap in mean total cost that each of ``policies`` closes, per file and hour.
 
     Each row holds the instances on which every one of ``policies`` that the
-    file has ran, so that its shares compare like with like.
+    file has ran, so that its shares compare like with like.  ``names``, when
+    given, head the policies' columns instead of their labels.
     """
     from coordinator.experiments.analysis import common_instances, complete_seeds, summarize
     from coordinator.experiments.results import read_results
@@ -297,7 +307,8 @@ def render_gap_closed(sec: Section) -> list[str]:
             for hour in sorted(seeds):
                 cells = [gap.get((hour, p)) for p in policies]
                 rows.append([name, f"{hour} h", str(seeds[hour])] + [fmt(None if g is None else 100 * g, "{:.1f} %") for g in cells])
-    return table(["", "hour", "instances"] + [f"`{p}`" for p in policies], rows)
+    names = sec.get("names", [f"`{p}`" for p in policies])
+    return table(["", "hour", "instances"] + list(names), rows)
 
 
 def _bootstrap(diffs: list[float]) -> tuple[float, float]:

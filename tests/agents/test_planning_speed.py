@@ -14,6 +14,7 @@ import pytest
 from agents.base import make_policy
 from agents.rollout import (
     DemandTables,
+    HourInputs,
     RolloutConfig,
     Shortcuts,
     plan_agent,
@@ -121,17 +122,21 @@ def test_approximations_are_deterministic_for_a_seed(city: City, approx: dict) -
     assert runs[0] == runs[1]
 
 
+GREEDY_LOCAL = {"base": "greedy", "scope": "local"}
+
+
 @pytest.mark.parametrize(("name", "options", "approx"), [
-    ("surge", EXACT, {}),
-    ("surge", {"batch": 16}, {"adaptive": 2.0, "batch": 16, "cap": 24}),  # surge's default approximations, in several batches
-    ("garces2023", {}, {}),
+    ("surge", {**EXACT, **GREEDY_LOCAL}, GREEDY_LOCAL),
+    ("surge", {"batch": 16, **GREEDY_LOCAL}, {"adaptive": 1.0, "batch": 16, "cap": 12, **GREEDY_LOCAL}),  # the approximations, in several batches
+    ("surge", {"batch": 16}, {"adaptive": 1.0, "batch": 16, "cap": 12, "base": "rebalance", "scope": "map"}),  # surge's defaults
+    ("garces2023", {}, {"base": "ia", "scope": "map", "ce": "standard"}),
 ])
 def test_waves_match_sequential_turns(city: City, name: str, options: dict, approx: dict) -> None:
-    extra = {} if name == "surge" else {"base": "ia", "scope": "map", "ce": "standard"}
     obs = seeded_state(city, 7, taxis=80)
     fc = forecast(city, np.random.default_rng(7))
-    config = RolloutConfig(horizon=H, samples=SAMPLES, prune=default_prune(H), seed=1, **extra, **approx)
-    ctx = prepare_step(city, config, obs, DemandTables.build(city, fc, config.ce, config.seed), obs.t % 60)
+    config = RolloutConfig(horizon=H, samples=SAMPLES, prune=default_prune(H), seed=1, **approx)
+    hour = HourInputs.of(city, fc) if config.base == "rebalance" else None
+    ctx = prepare_step(city, config, obs, DemandTables.build(city, fc, config.ce, config.seed), obs.t % 60, hour=hour)
     sequential = ctx.base_controls.copy()
     for agent in np.flatnonzero(obs.tau == 0):
         sequential[agent] = plan_agent(ctx, sequential[:agent], int(agent))
@@ -159,8 +164,8 @@ def test_bench_plan_reports_variants_side_by_side(tmp_path: Path) -> None:
     assert res["variants"]["all"]["hashes"] == res["variants"]["none"]["hashes"] == res["variants"]["with-minute_lists"]["hashes"]
     assert len(res["free_taxis"]) == len(res["critical_path"]) == len(res["seconds_per_free_taxi"]) == 2
     assert "ms per free taxi" in proc.stdout and "same decisions" in proc.stdout
-    assert res["approximations"] == "adaptive=2 in batches of 50, cap=24" and res["rollout"]["cap"] == 24
-    assert "surge (adaptive=2 in batches of 50, cap=24): free taxis" in proc.stdout
+    assert res["approximations"] == "adaptive=1 in batches of 50, cap=12" and res["rollout"]["cap"] == 12
+    assert "surge (rebalance base, H=3, 8 samples, adaptive=1 in batches of 50, cap=12): free taxis" in proc.stdout
     bad = run_cli("bench", "plan", "--variants", "no-magic")
     assert bad.returncode != 0 and "unknown variant 'no-magic'" in bad.stderr
 

@@ -107,21 +107,25 @@ def test_option_strings_are_parsed_to_their_declared_types() -> None:
     assert parse_policy("oracle-auction:window=0")[1] == {"window": 0}
 
 
-def test_surge_plans_with_its_approximations_by_default_and_exactly_when_they_are_off() -> None:
+def test_surge_plans_over_rebalance_by_default_and_as_the_paper_with_its_options_pinned() -> None:
     from agents.base import parse_policy, policy_class
     from agents.rollout_config import RolloutConfig, default_prune
-    from agents.rollout_policy import EXACT, pinned_options
+    from agents.rollout_policy import EXACT, PAPER, pinned_options
 
     surge, garces = policy_class("surge"), policy_class("garces2023")
     c = surge.rollout_config()
-    assert (c.adaptive, c.batch, c.cap) == (2.0, 50, 24)
-    exact = RolloutConfig(prune=default_prune(10))
-    assert surge.rollout_config(**EXACT) == exact
-    assert surge.rollout_config(**parse_policy("surge:adaptive=none,cap=none,batch=100")[1]) == exact
+    assert (c.base, c.scope, c.horizon, c.samples, c.adaptive, c.batch, c.cap) == ("rebalance", "map", 20, 200, 1.0, 50, 12)
+    assert c.prune == default_prune(20)
+    paper = RolloutConfig(prune=default_prune(10))  # the dataclass's own defaults are the paper's
+    assert surge.rollout_config(**PAPER) == paper
+    assert surge.rollout_config(**parse_policy("surge:base=greedy,scope=local,horizon=10,samples=1000,adaptive=none,cap=none,batch=100")[1]) == paper
     off = surge.rollout_config(cap=None)  # each approximation is turned off on its own
-    assert (off.adaptive, off.batch, off.cap) == (2.0, 50, None)
+    assert (off.adaptive, off.batch, off.cap) == (1.0, 50, None)
     assert garces.rollout_config() == garces.rollout_config(**EXACT)
-    assert pinned_options("surge:cap=12,forecast=true-rate") == {"adaptive": None, "batch": 100}
+    # Pinned: what the label does not set and today's default differs in.
+    assert pinned_options("surge:cap=12,forecast=true-rate") == {"horizon": 10, "samples": 1000, "base": "greedy", "scope": "local",
+                                                                  "adaptive": None, "batch": 100}
+    assert pinned_options("surge:base=rebalance,scope=map,horizon=20,samples=200,cap=12,adaptive=1", {**PAPER, "batch": 50}) == {}
     assert pinned_options("garces2023") == pinned_options("greedy") == {}
 
 

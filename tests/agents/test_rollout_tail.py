@@ -160,13 +160,14 @@ def test_waves_match_sequential_turns_with_a_tail(end: dict) -> None:
     city = load_city("synthetic")
     obs = seeded_state(city, 7, taxis=80)
     fc = forecast(city, np.random.default_rng(7))
-    config = RolloutConfig(horizon=H, samples=SAMPLES, prune=default_prune(H), seed=1, adaptive=2.0, batch=16, cap=24, **end)
+    config = RolloutConfig(horizon=H, samples=SAMPLES, prune=default_prune(H), seed=1, adaptive=1.0, batch=16, cap=12, **end)
     ctx = prepare_step(city, config, obs, DemandTables.build(city, fc, config.ce, config.seed), obs.t % 60)
     sequential = ctx.base_controls.copy()
     for agent in np.flatnonzero(obs.tau == 0):
         sequential[agent] = plan_agent(ctx, sequential[:agent], int(agent))
     assert plan_waves(city, obs, config.prune).critical_path < np.flatnonzero(obs.tau == 0).size
-    policy = make_policy("surge", city, forecast="true-rate", workers=2, horizon=H, samples=SAMPLES, seed=1, batch=16, **end)
+    policy = make_policy("surge", city, forecast="true-rate", workers=2, horizon=H, samples=SAMPLES, seed=1, batch=16, base="greedy",
+                         scope="local", **end)
     assert policy.config == config
     u = ctx.base_controls.copy()
     policy._act_waves(ctx, u)

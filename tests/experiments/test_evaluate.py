@@ -188,10 +188,11 @@ def test_old_results_read_with_their_oracle_renamed(small_run: dict, tmp_path: P
 
 
 def test_results_planned_before_surge_had_approximations_read_as_exact(small_run: dict, tmp_path: Path) -> None:
-    """A file without ``surge_defaults`` was planned exactly: its surge labels read with the approximations off, so no run of today's defaults takes their rows."""
-    from agents.rollout_policy import EXACT
+    """A file without ``surge_defaults`` was planned exactly over the greedy base: its surge labels read so, and no run of today's defaults takes their rows."""
+    from agents.rollout_policy import EXACT, GREEDY_ROLLOUT
 
-    assert small_run["surge_defaults"] == {"cap": 24, "adaptive": 2.0, "batch": 50}
+    assert small_run["surge_defaults"] == {"horizon": 20, "samples": 200, "base": "rebalance", "scope": "map", "cap": 12, "adaptive": 1.0,
+                                           "batch": 50}
     labels = ["surge:samples=8,forecast=true-rate", "surge:adaptive=3,cap=24,samples=8,forecast=true-rate"]
     old = json.loads(json.dumps(small_run))
     del old["surge_defaults"]
@@ -200,14 +201,22 @@ def test_results_planned_before_surge_had_approximations_read_as_exact(small_run
     path = tmp_path / "old.json"
     write_json(old, path)
     doc = read_results(path)
-    assert doc["config"]["policy_options"] == {**FAST, labels[0]: EXACT, labels[1]: {"batch": 100}}
+    greedy = {k: v for k, v in GREEDY_ROLLOUT.items() if k != "samples"}  # both labels set their samples
+    assert doc["config"]["policy_options"] == {**FAST, labels[0]: {**greedy, **EXACT}, labels[1]: {**greedy, "batch": 100}}
     assert doc["surge_defaults"] == small_run["surge_defaults"]
     assert read_results(path) == doc and upgrade(doc) == doc  # read twice, brought up to date once
+
+    # A file that records only the approximations planned over the greedy base, 10 minutes, local sampling.
+    mid = {**old, "surge_defaults": {"cap": 24, "adaptive": 2.0, "batch": 50}}
+    write_json(mid, path)
+    assert read_results(path)["config"]["policy_options"] == {**FAST, labels[0]: {**greedy, "cap": 24, "adaptive": 2.0},
+                                                              labels[1]: greedy}
+    write_json(old, path)
 
     grid = dict(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle", *labels])
     today = EvalConfig(**grid, policy_options=FAST)
     assert {label for rows in borrowable(today, doc).values() for label in rows} == {"greedy", "ia", "oracle"}
-    pinned = EvalConfig(**grid, policy_options={**FAST, labels[0]: EXACT, labels[1]: {"batch": 100}})
+    pinned = EvalConfig(**grid, policy_options={**FAST, labels[0]: {**greedy, **EXACT}, labels[1]: {**greedy, "batch": 100}})
     assert all(set(rows) >= set(labels) for rows in borrowable(pinned, doc).values())
     with pytest.raises(DataError, match="was written with policy_options="):
         evaluate(today, progress=lambda _msg: None, checkpoint=path, resume=True)

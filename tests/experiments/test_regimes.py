@@ -54,6 +54,11 @@ def test_table_figure_and_command(docs: list[dict], tmp_path: Path) -> None:
     assert "true-rate − previous-hour" in text and len(text.splitlines()) == 2 + len(rows)
     plot_regimes(rows, tmp_path / "fig.png")
     assert (tmp_path / "fig.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    alone = [{**r, "forecast_differences": []} for r in rows]  # no other forecast: the top row of the figure alone
+    plot_regimes(alone, tmp_path / "alone.png")
+    import matplotlib.image
+
+    assert matplotlib.image.imread(tmp_path / "alone.png").shape[0] < matplotlib.image.imread(tmp_path / "fig.png").shape[0]
     files = []
     for k, doc in enumerate(docs):
         write_json(doc, tmp_path / f"r{k}.json")

@@ -1,6 +1,9 @@
 """surge − rebalance and surge − match (and the other pairs) per map, date and hour from the results files, seeds finished at every hour.
 
 Run from the repository root: python benchmarks/practice-baselines/test-2022-11-17/summarize.py
+
+``FAST`` is today's default ``surge``, named in full. A bare ``surge`` in these files is the greedy rollout
+(``surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2``), as the files record (``surge_defaults``).
 """
 
 from __future__ import annotations
@@ -18,6 +21,8 @@ HERE = Path(__file__).parent
 FILES = {
     "synthetic, 10 seeds at 17 and 19 h": HERE / "results-synthetic.json",
     "nyc (real 2022 level), 10 seeds at 4 hours": HERE / "results-nyc-real-level.json",
+    "synthetic, main table, default surge": HERE / "fast-synthetic.json",
+    "nyc (real 2022 level), main table, default surge": HERE / "fast-nyc.json",
     "synthetic, main table": HERE / "main-synthetic.json",
     "nyc (real 2022 level), main table": HERE / "main-nyc.json",
     "synthetic, 20-minute rollout over rebalance at 4 hours": HERE / "h20-synthetic.json",
@@ -28,9 +33,10 @@ FILES = {
     "nyc (real 2022 level), further test dates, 20-minute rollout over rebalance": HERE.parent / "test-dates" / "h20-nyc.json",
 }
 H10, H20 = "surge:base=rebalance,scope=map", "surge:base=rebalance,scope=map,horizon=20"
-PAIRS = (("surge", "rebalance"), ("surge", "match"), (H20, "rebalance"), (H20, "match"), (H20, "surge"), (H20, H10), (H10, "rebalance"),
-         (H10, "surge"), ("surge", "ia"), ("rebalance", "match"), ("match", "ia"))
-GAP = ("surge", "rebalance", "match", H10, H20)
+FAST = H20 + ",samples=200,cap=12,adaptive=1"
+PAIRS = ((FAST, "rebalance"), (FAST, "match"), (FAST, "surge"), (FAST, H20), ("surge", "rebalance"), ("surge", "match"), (H20, "rebalance"),
+         (H20, "match"), (H20, "surge"), (H20, H10), (H10, "rebalance"), (H10, "surge"), ("surge", "ia"), ("rebalance", "match"), ("match", "ia"))
+GAP = ("surge", "rebalance", "match", H10, H20, FAST)
 
 
 def main() -> None:
@@ -50,7 +56,7 @@ def main() -> None:
             common = complete_seeds(common_instances(doc, GAP))
             gap = {f"{r['hour']} {r['policy']}": r["gap_closed"] for r in summarize(common) if r["policy"] in GAP}
             entry["dates"][date] = {"seeds": sorted({e["seed"] for e in doc["episodes"]}), "pairs": pairs,
-                                    "verdicts": against_practice(doc, "surge"), "gap_closed": gap}
+                                    "verdicts": {p: against_practice(doc, p) for p in ("surge", FAST) if p in doc["config"]["policies"]}, "gap_closed": gap}
             for r in pairs:
                 print(f"{name} {date} {r['hour']}h {r['policy']} − {r['against']}: {r['cost_difference']:+.1f} "
                       f"[{r['ci95'][0]:+.1f}, {r['ci95'][1]:+.1f}], wins {r['wins']}/{r['n']}")
