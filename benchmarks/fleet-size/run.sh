@@ -7,8 +7,7 @@
 # short holds whole seeds in every regime.
 # The 100-taxi rows of the practice-baselines main table have the same settings: they are borrowed, not run again.
 # SURGE overrides the command (default: surge), e.g. SURGE="python -m coordinator.cli"; JOBS the parallel episodes (default 1).
-# Today's `surge` will not resume these files (one line names both settings): rerun into an empty folder with
-# surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2 in place of the bare `surge`.
+# To rerun these files under today's defaults see "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
 cd "$(dirname "$0")/../.."
 OUT=benchmarks/fleet-size
 PRACTICE=benchmarks/practice-baselines/test-2022-11-17

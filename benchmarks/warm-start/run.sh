@@ -4,8 +4,7 @@
 # Seeds come in rounds (1, 3, 6, 10) on both maps in turn, so that a run cut short holds whole seeds on both.
 # SURGE overrides the command (default: surge), e.g. SURGE="python -m coordinator.cli". A bare `surge` in these files is the
 # greedy rollout (they record it as surge's defaults); FAST is today's default surge, named in full.
-# Today's `surge` will not resume these files (one line names both settings): rerun into an empty folder with
-# surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2 in place of the bare `surge`.
+# To rerun these files under today's defaults see "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
 cd "$(dirname "$0")/../.."
 OUT=benchmarks/warm-start
 SURGE=${SURGE:-surge}

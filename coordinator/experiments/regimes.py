@@ -110,7 +110,7 @@ def plot_regimes(rows: list[dict], path: str | Path, title: str = "") -> None:
         for k, h in enumerate(sorted({r["hour"] for r in mine})):
             at = sorted((r for r in mine if r["hour"] == h), key=lambda r: r["taxis"])
             _errorbars(axes[0, j], at, f"{h} h", k)
-            for i, f in enumerate(dict.fromkeys(d["forecast"] for r in at for d in r["forecast_differences"]) if n_rows > 1 else ()):
+            for i, f in enumerate(dict.fromkeys(d["forecast"] for r in at for d in r["forecast_differences"])):
                 pts = [{"taxis": r["taxis"], **d} for r in at for d in r["forecast_differences"] if d["forecast"] == f]
                 _errorbars(axes[1, j], pts, f"{f} − {at[0]['forecast']}, {h} h", 2 * k + i, marker="os^v"[i % 4])
         axes[0, j].set_title(m)

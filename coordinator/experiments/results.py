@@ -87,15 +87,11 @@ def mistyped_field(ep: dict) -> str | None:
     return next((f for f, (types, _) in EPISODE_TYPES.items() if f in ep and (isinstance(ep[f], bool) or not isinstance(ep[f], types))), None)
 
 
-#: The planner options whose ``surge`` defaults a results file records (``surge_defaults``).
-RECORDED_DEFAULTS = ("horizon", "samples", "base", "scope", "cap", "adaptive", "batch")
-
-
 def surge_defaults() -> dict:
-    """The planner options a ``surge`` label plans with when it does not set them; results files record them."""
-    from agents.rollout_policy import Surge
+    """The planner options a ``surge`` label plans with when it does not set them (those :data:`agents.rollout_policy.PAPER` fixes); results files record them."""
+    from agents.rollout_policy import PAPER, Surge
 
-    return {k: Surge.defaults[k] for k in RECORDED_DEFAULTS}
+    return {k: Surge.defaults[k] for k in PAPER}
 
 
 def pin_surge_defaults(config: dict, recorded: dict | None) -> dict:

@@ -4,9 +4,8 @@
 # of its four hours, both maps, previous-hour demand for every policy. Its first 10 seeds are borrowed from
 # h20-*.json and the baselines' rows from main-*.json, so only FAST's seeds 10-24 run. FAST is today's default surge,
 # named in full; a bare `surge` in these files is the greedy rollout (greedy base, 10 minutes, local sampling, 1,000
-# samples, cap=24, adaptive=2), borrowed from main-*.json, as the files record. Today's `surge` will not resume them
-# (one line names both settings): rerun into an empty folder with
-# surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2 in place of `surge`.
+# samples, cap=24, adaptive=2), borrowed from main-*.json, as the files record; to rerun them under today's defaults
+# see "Labels" in README.md beside this script.
 set -e
 cd "$(dirname "$0")/../../.."
 OUT=benchmarks/practice-baselines/test-2022-11-17

@@ -6,11 +6,8 @@
 # added in rounds (ROUNDS, default "5 7 10") so that a run cut short holds whole seeds at every hour; a rerun resumes.
 # FAST is the same rollout with three approximations that plan it about 6 times faster (samples=200, cap=12,
 # adaptive=1; benchmarks/rollout-variants/ measures what they cost on validation data).
-# The files record surge's defaults as those of the greedy rollout (greedy base, 10 minutes, local sampling, 1,000
-# samples, cap=24, adaptive=2) and read so: a bare `surge` here is the greedy rollout, and a label names what it changes
-# from it. Today's `surge` will not resume them (one line names both settings): rerun into an empty folder with
-# surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2 in place of `surge`, and
-# ,samples=1000,cap=24,adaptive=2 added to a label with base=rebalance.
+# A bare `surge` in these files is the greedy rollout, as they record; to rerun them under today's defaults see
+# "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
 set -e
 cd "$(dirname "$0")/../../.."
 OUT=benchmarks/practice-baselines/test-2022-11-17

@@ -2,11 +2,8 @@
 # surge rolled out over rebalance (base=rebalance, scope=map) added to the test-date runs of run.sh and
 # run-real-level.sh: the same instances and files, previous-hour demand for every policy; a resumed run
 # computes only the new label, seed by seed. The two maps run side by side.
-# The files record surge's defaults as those of the greedy rollout (greedy base, 10 minutes, local sampling, 1,000
-# samples, cap=24, adaptive=2) and read so: a bare `surge` here is the greedy rollout, and a label names what it changes
-# from it. Today's `surge` will not resume them (one line names both settings): rerun into an empty folder with
-# surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2 in place of `surge`, and
-# ,samples=1000,cap=24,adaptive=2 added to a label with base=rebalance.
+# A bare `surge` in these files is the greedy rollout, as they record; to rerun them under today's defaults see
+# "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
 set -e
 cd "$(dirname "$0")/../../.."
 OUT=benchmarks/practice-baselines/test-2022-11-17

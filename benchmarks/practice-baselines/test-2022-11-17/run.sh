@@ -3,11 +3,8 @@
 # every policy (the real map: run-real-level.sh).
 # garces2023 is left out: planned exactly at 1,000 samples it took longer than the time this run had on a shared 2-core machine.
 # Seeds are added in rounds (3, then 6, then 10) so that a run cut short holds whole seeds.
-# The files record surge's defaults as those of the greedy rollout (greedy base, 10 minutes, local sampling, 1,000
-# samples, cap=24, adaptive=2) and read so: a bare `surge` here is the greedy rollout, and a label names what it changes
-# from it. Today's `surge` will not resume them (one line names both settings): rerun into an empty folder with
-# surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2 in place of `surge`, and
-# ,samples=1000,cap=24,adaptive=2 added to a label with base=rebalance.
+# A bare `surge` in these files is the greedy rollout, as they record; to rerun them under today's defaults see
+# "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
 set -e
 cd "$(dirname "$0")/../../.."
 OUT=benchmarks/practice-baselines/test-2022-11-17
