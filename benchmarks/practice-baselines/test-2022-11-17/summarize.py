@@ -27,6 +27,7 @@ FILES = {
     "nyc (real 2022 level), main table": HERE / "main-nyc.json",
     "synthetic, 20-minute rollout over rebalance at 4 hours": HERE / "h20-synthetic.json",
     "nyc (real 2022 level), 20-minute rollout over rebalance at 4 hours": HERE / "h20-nyc.json",
+    "nyc (real 2022 level), main table, garces2023 at 17 and 19 h": HERE / "garces-nyc.json",
     "synthetic, further test dates": HERE.parent / "test-dates" / "results-synthetic.json",
     "nyc (real 2022 level), further test dates": HERE.parent / "test-dates" / "results-nyc.json",
     "synthetic, further test dates, 20-minute rollout over rebalance": HERE.parent / "test-dates" / "h20-synthetic.json",
@@ -35,8 +36,9 @@ FILES = {
 H10, H20 = "surge:base=rebalance,scope=map", "surge:base=rebalance,scope=map,horizon=20"
 FAST = H20 + ",samples=200,cap=12,adaptive=1"
 PAIRS = ((FAST, "rebalance"), (FAST, "match"), (FAST, "surge"), (FAST, H20), ("surge", "rebalance"), ("surge", "match"), (H20, "rebalance"),
-         (H20, "match"), (H20, "surge"), (H20, H10), (H10, "rebalance"), (H10, "surge"), ("surge", "ia"), ("rebalance", "match"), ("match", "ia"))
-GAP = ("surge", "rebalance", "match", H10, H20, FAST)
+         (H20, "match"), (H20, "surge"), (H20, H10), (H10, "rebalance"), (H10, "surge"), ("surge", "ia"), ("rebalance", "match"), ("match", "ia"),
+         (FAST, "garces2023"))
+GAP = ("surge", "rebalance", "match", H10, H20, FAST, "garces2023")
 
 
 def main() -> None:
