@@ -22,6 +22,11 @@ from scipy import stats
 HERE = Path(__file__).parent
 #: The rollout over ``rebalance`` chosen here; its cheaper approximations are paired with it too.
 H20 = "surge:forecast=previous-hour,base=rebalance,scope=map,horizon=20"
+#: Its fast variant, today's default ``surge``: the variants with one approximation off are paired with it too.
+FAST = H20 + ",samples=200,cap=12,adaptive=1"
+#: How the results page names the 20-minute rollout's variants: by the approximation each turns off.
+NAMES = {H20: "the full rollout", FAST: "the default (all three)", H20 + ",samples=1000,cap=12,adaptive=1": "samples=1000 (not 200)",
+         H20 + ",samples=200,cap=24,adaptive=1": "cap=24 (not 12)", H20 + ",samples=200,cap=12,adaptive=2": "adaptive=2 (not 1)"}
 
 
 def load() -> dict[str, dict[tuple, dict]]:
@@ -69,16 +74,18 @@ def main() -> None:
     out = []
     for scen, rows in sorted(data.items()):
         labels = sorted({k[3] for k in rows})
-        refs = [r for r in labels if r.startswith(("rebalance", "match"))] + [r for r in ("surge:forecast=previous-hour", "ia", H20) if r in labels]
+        refs = [r for r in labels if r.startswith(("rebalance", "match"))] + [r for r in ("surge:forecast=previous-hour", "ia", H20, FAST) if r in labels]
         for hours in ((17, 19), (17,), (19,)):
             for v in labels:
                 for r in refs:
-                    if v == r:
+                    if v == r or (r == FAST and not v.startswith(H20 + ",")):
                         continue
                     res = pair(rows, v, r, hours)
                     if res is None:
                         continue
                     res.update(scenario=scen, hours=list(hours))
+                    if v.startswith(H20 + ",") and r in (H20, FAST):
+                        res.update(family="approximations", reference_name=NAMES[r], variant_name=NAMES.get(v, v[len(H20) + 1:]))
                     out.append(res)
                     t, f, s = res["total"], res["minutes_0_19"], res["minutes_20_59"]
                     print(f"{scen:9} {'+'.join(map(str, hours)):5} {v:45} − {r:33} n={res['n']:2}  total {t['mean']:+7.1f} "
