@@ -77,14 +77,15 @@ def main() -> None:
         refs = [r for r in labels if r.startswith(("rebalance", "match"))] + [r for r in ("surge:forecast=previous-hour", "ia", H20, FAST) if r in labels]
         for hours in ((17, 19), (17,), (19,)):
             for v in labels:
+                variant_of_h20 = v.startswith(H20 + ",")
                 for r in refs:
-                    if v == r or (r == FAST and not v.startswith(H20 + ",")):
+                    if v == r or (r == FAST and not variant_of_h20):
                         continue
                     res = pair(rows, v, r, hours)
                     if res is None:
                         continue
                     res.update(scenario=scen, hours=list(hours))
-                    if v.startswith(H20 + ",") and r in (H20, FAST):
+                    if variant_of_h20 and r in (H20, FAST):
                         res.update(family="approximations", reference_name=NAMES[r], variant_name=NAMES.get(v, v[len(H20) + 1:]))
                     out.append(res)
                     t, f, s = res["total"], res["minutes_0_19"], res["minutes_20_59"]
