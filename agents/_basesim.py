@@ -14,7 +14,7 @@ from agents._sampling import BIG_HOPS
 from agents._search import nearest_request, oldest_at, time_to_pickup, walk
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def simulate_greedy(
     horizon: int,
     alive: np.ndarray,
@@ -213,7 +213,7 @@ def simulate_greedy(
     return cost + n_alive, t_first, n_ev, spared
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def shadow_greedy(
     horizon: int,
     c: int,

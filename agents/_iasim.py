@@ -12,7 +12,7 @@ from numba import njit
 from agents._search import nearest_request, oldest_at, time_to_pickup
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", _nrt=False)
 def _heap_push(heap: np.ndarray, n: int, key: int) -> int:
     """Push ``key`` onto the min-heap ``heap[:n]``; return the new size."""
     j = n
@@ -26,7 +26,7 @@ def _heap_push(heap: np.ndarray, n: int, key: int) -> int:
     return n + 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", _nrt=False)
 def _heap_pop(heap: np.ndarray, n: int) -> tuple[int, int]:
     """Pop the smallest key of the min-heap ``heap[:n]``; return it and the new size."""
     top = heap[0]
@@ -46,7 +46,7 @@ def _heap_pop(heap: np.ndarray, n: int) -> tuple[int, int]:
     return top, n
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def simulate_ia(
     horizon: int,
     alive: np.ndarray,

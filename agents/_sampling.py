@@ -29,7 +29,7 @@ _INV53 = 1.0 / 9007199254740992.0
 BIG_HOPS = 1 << 30
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", _nrt=False)
 def _mix(z: np.uint64) -> np.uint64:
     """The splitmix64 finaliser."""
     z = (z ^ (z >> _S30)) * _M1
@@ -37,7 +37,7 @@ def _mix(z: np.uint64) -> np.uint64:
     return z ^ (z >> _S31)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def stream_key(seed: int, t: int, agent: int) -> np.uint64:
     """The 64-bit random key of one agent's decision at minute ``t``."""
     z = _mix(np.uint64(seed & 0x7FFFFFFFFFFFFFFF) + _GOLDEN)
@@ -45,20 +45,20 @@ def stream_key(seed: int, t: int, agent: int) -> np.uint64:
     return _mix(z ^ (np.uint64(agent & 0x7FFFFFFFFFFFFFFF) + _GOLDEN))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", _nrt=False)
 def _stream(key: np.uint64, sample: int, minute: int, sector: int) -> np.uint64:
     z = _mix(key ^ (np.uint64(sample) * _M1 + _GOLDEN))
     z = _mix(z ^ (np.uint64(minute) * _M2 + _GOLDEN))
     return _mix(z ^ (np.uint64(sector) * _M1 + _M2))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", _nrt=False)
 def _next(state: np.uint64) -> tuple[np.uint64, float]:
     state = state + _GOLDEN
     return state, float(_mix(state) >> _S11) * _INV53
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", _nrt=False)
 def _search(cum: np.ndarray, lo: int, hi: int, u: float) -> int:
     """First index ``i`` in ``[lo, hi)`` with ``cum[i] > u · cum[hi-1]`` (inverse CDF)."""
     x = u * cum[hi - 1]
@@ -72,7 +72,7 @@ def _search(cum: np.ndarray, lo: int, hi: int, u: float) -> int:
     return a
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def arrival_count(mode: int, rate: float, minute: int, u: float) -> int:
     """Requests entering a sector in one minute under certainty equivalence.
 
@@ -89,7 +89,7 @@ def arrival_count(mode: int, rate: float, minute: int, u: float) -> int:
     return int(np.floor(rate * (minute + 1) + 0.5) - np.floor(rate * minute + 0.5))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def sample_arrivals(
     key: np.uint64,
     sample: int,

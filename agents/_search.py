@@ -12,7 +12,7 @@ from numba import njit
 from agents._sampling import BIG_HOPS
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def fill_row(v: int, near: np.ndarray, near_d: np.ndarray, e_pick: np.ndarray, dist: np.ndarray) -> None:
     """List at ``near[v]``/``near_d[v]`` the requests nearest to node ``v`` by ``(dist[v, pickup], code)``."""
     r0 = e_pick.shape[0]
@@ -34,7 +34,7 @@ def fill_row(v: int, near: np.ndarray, near_d: np.ndarray, e_pick: np.ndarray, d
             m += 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", _nrt=False)
 def nearest_request(
     v: int,
     lb: int,
@@ -97,7 +97,7 @@ def nearest_request(
     return best_d, best_c, arr_d
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def oldest_at(
     v: int,
     alive: np.ndarray,
@@ -129,7 +129,7 @@ def oldest_at(
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def walk(v: int, target: int, hops: int, hop_t: np.ndarray) -> int:
     """The node ``hops`` hops from ``v`` along the shortest path to ``target`` (``hop_t[target, v]`` is v's next hop)."""
     for _ in range(hops):
@@ -137,7 +137,7 @@ def walk(v: int, target: int, hops: int, hop_t: np.ndarray) -> int:
     return v
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def time_to_pickup(
     v: int,
     busy: int,

@@ -8,6 +8,7 @@
 # The 100-taxi rows of the practice-baselines main table have the same settings: they are borrowed, not run again.
 # SURGE overrides the command (default: surge), e.g. SURGE="python -m coordinator.cli"; JOBS the parallel episodes (default 1).
 # To rerun these files under today's defaults see "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
+set -e
 cd "$(dirname "$0")/../.."
 OUT=benchmarks/fleet-size
 PRACTICE=benchmarks/practice-baselines/test-2022-11-17
@@ -23,7 +24,8 @@ for N in ${ROUNDS:-1 2 3 6 10}; do
       BORROW=""; [ "$T" = 100 ] && BORROW="--borrow $LEND"
       $SURGE evaluate --scenario "$S" --data ../shared/data --date 2022-11-17 --hours 17 19 --seeds "$N" --taxis "$T" --minutes 60 \
         --forecast previous-hour --policies greedy rebalance match surge surge:forecast=true-rate $EXTRA "$FAST" --jobs "${JOBS:-1}" \
-        --json "$OUT/results-$S-$T.json" --resume $BORROW > "$OUT/summary-$S-$T.txt" 2>> "$OUT/run.log"
+        --json "$OUT/results-$S-$T.json" --resume $BORROW > "$OUT/summary-$S-$T.txt.tmp" 2>> "$OUT/run.log"
+      mv "$OUT/summary-$S-$T.txt.tmp" "$OUT/summary-$S-$T.txt"
     done
   done
 done

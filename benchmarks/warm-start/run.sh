@@ -5,6 +5,7 @@
 # SURGE overrides the command (default: surge), e.g. SURGE="python -m coordinator.cli". A bare `surge` in these files is the
 # greedy rollout (they record it as surge's defaults); FAST is today's default surge, named in full.
 # To rerun these files under today's defaults see "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
+set -e
 cd "$(dirname "$0")/../.."
 OUT=benchmarks/warm-start
 SURGE=${SURGE:-surge}
@@ -13,6 +14,7 @@ for N in 1 3 6 10; do
   for S in synthetic nyc; do
     $SURGE evaluate --warm-start --scenario "$S" --data ../shared/data --date 2022-11-17 --hours 17 19 --seeds "$N" --taxis 100 \
       --minutes 60 --forecast previous-hour --policies greedy rebalance match surge "$FAST" --jobs 2 \
-      --json "$OUT/results-$S.json" --resume > "$OUT/summary-$S.txt" 2>> "$OUT/run.log"
+      --json "$OUT/results-$S.json" --resume > "$OUT/summary-$S.txt.tmp" 2>> "$OUT/run.log"
+    mv "$OUT/summary-$S.txt.tmp" "$OUT/summary-$S.txt"
   done
 done

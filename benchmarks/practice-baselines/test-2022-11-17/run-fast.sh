@@ -19,6 +19,7 @@ for N in ${ROUNDS:-15 20 25}; do
   for MAP in synthetic nyc; do
     surge evaluate --scenario "$MAP" --data ../shared/data --date 2022-11-17 --hours 15 17 19 21 --seeds "$N" --taxis 100 \
         --minutes 60 --forecast previous-hour --policies greedy ia surge match rebalance "$FAST" --jobs 2 \
-        --json "$OUT/fast-$MAP.json" --resume --borrow "$OUT/main-$MAP.json" > "$OUT/summary-fast-$MAP.txt"
+        --json "$OUT/fast-$MAP.json" --resume --borrow "$OUT/main-$MAP.json" > "$OUT/summary-fast-$MAP.txt.tmp"
+    mv "$OUT/summary-fast-$MAP.txt.tmp" "$OUT/summary-fast-$MAP.txt"
   done
 done

@@ -10,5 +10,6 @@ FAST=surge:base=rebalance,scope=map,horizon=20,samples=200,cap=12,adaptive=1
 for N in ${ROUNDS:-5 10}; do
   surge evaluate --scenario nyc --data ../shared/data --date 2022-11-17 --hours 17 19 --seeds "$N" --taxis 100 \
       --minutes 60 --forecast previous-hour --policies greedy rebalance match "$FAST" garces2023 --jobs "${JOBS:-1}" \
-      --json "$OUT/garces-nyc.json" --resume --borrow "$OUT/fast-nyc.json" > "$OUT/summary-garces-nyc.txt"
+      --json "$OUT/garces-nyc.json" --resume --borrow "$OUT/fast-nyc.json" > "$OUT/summary-garces-nyc.txt.tmp"
+  mv "$OUT/summary-garces-nyc.txt.tmp" "$OUT/summary-garces-nyc.txt"
 done

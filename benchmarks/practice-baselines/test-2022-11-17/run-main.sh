@@ -11,8 +11,10 @@ OUT=benchmarks/practice-baselines/test-2022-11-17
 for N in 15 20 25; do
   surge evaluate --scenario synthetic --date 2022-11-17 --hours 15 17 19 21 --seeds "$N" --taxis 100 --minutes 60 \
     --forecast previous-hour --policies greedy ia surge match rebalance --jobs 2 --json "$OUT/main-synthetic.json" --resume \
-    --borrow "$OUT/results-synthetic.json" > "$OUT/summary-main-synthetic.txt"
+    --borrow "$OUT/results-synthetic.json" > "$OUT/summary-main-synthetic.txt.tmp"
+  mv "$OUT/summary-main-synthetic.txt.tmp" "$OUT/summary-main-synthetic.txt"
   surge evaluate --scenario nyc --data ../shared/data --date 2022-11-17 --hours 15 17 19 21 --seeds "$N" --taxis 100 --minutes 60 \
     --forecast previous-hour --policies greedy ia surge match rebalance --jobs 2 --json "$OUT/main-nyc.json" --resume \
-    --borrow "$OUT/results-nyc-real-level.json" > "$OUT/summary-main-nyc.txt"
+    --borrow "$OUT/results-nyc-real-level.json" > "$OUT/summary-main-nyc.txt.tmp"
+  mv "$OUT/summary-main-nyc.txt.tmp" "$OUT/summary-main-nyc.txt"
 done

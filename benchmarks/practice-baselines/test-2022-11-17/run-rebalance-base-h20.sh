@@ -17,7 +17,8 @@ BASE="greedy ia surge match rebalance"
 add() {  # map, seeds, results file the label's rows are borrowed from
   surge evaluate --scenario "$1" --data ../shared/data --date 2022-11-17 --hours 15 17 19 21 --seeds "$2" --taxis 100 \
       --minutes 60 --forecast previous-hour --policies $BASE "$NEW" "$FAST" --jobs 2 --json "$OUT/h20-$1.json" --resume \
-      --borrow "$3" > "$OUT/summary-h20-$1.txt"
+      --borrow "$3" > "$OUT/summary-h20-$1.txt.tmp"
+  mv "$OUT/summary-h20-$1.txt.tmp" "$OUT/summary-h20-$1.txt"
 }
 for MAP in synthetic nyc; do
   [ -e "$OUT/h20-$MAP.json" ] || surge evaluate --scenario "$MAP" --data ../shared/data --date 2022-11-17 --hours 15 17 19 21 \

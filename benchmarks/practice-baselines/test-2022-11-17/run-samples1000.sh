@@ -11,5 +11,6 @@ S1000=surge:base=rebalance,scope=map,horizon=20,samples=1000,cap=12,adaptive=1
 for MAP in nyc synthetic; do
   surge evaluate --scenario "$MAP" --data ../shared/data --date 2022-11-17 --hours 15 17 19 21 --seeds 10 --taxis 100 \
       --minutes 60 --forecast previous-hour --policies greedy rebalance match "$FAST" "$S1000" --jobs "${JOBS:-1}" \
-      --json "$OUT/samples1000-$MAP.json" --resume --borrow "$OUT/fast-$MAP.json" > "$OUT/summary-samples1000-$MAP.txt"
+      --json "$OUT/samples1000-$MAP.json" --resume --borrow "$OUT/fast-$MAP.json" > "$OUT/summary-samples1000-$MAP.txt.tmp"
+  mv "$OUT/summary-samples1000-$MAP.txt.tmp" "$OUT/summary-samples1000-$MAP.txt"
 done

@@ -11,5 +11,6 @@ OUT=benchmarks/practice-baselines/test-2022-11-17
 for N in 3 6 10; do
   surge evaluate --scenario synthetic --date 2022-11-17 --hours 17 19 --seeds "$N" --taxis 100 --minutes 60 \
     --forecast previous-hour --policies greedy ia surge match rebalance --jobs 1 --json "$OUT/results-synthetic.json" --resume \
-    > "$OUT/summary-synthetic.txt"
+    > "$OUT/summary-synthetic.txt.tmp"
+  mv "$OUT/summary-synthetic.txt.tmp" "$OUT/summary-synthetic.txt"
 done

@@ -15,6 +15,7 @@ for N in ${ROUNDS:-3 5 10}; do
   for S in synthetic nyc; do
     surge evaluate --scenario "$S" --data ../shared/data --dates 2022-10-20 2022-12-08 --hours 17 19 --seeds "$N" --taxis 100 \
       --minutes 60 --forecast previous-hour --policies greedy ia surge match rebalance "$NEW" "$FAST" \
-      --jobs 2 --json "$OUT/h20-$S.json" --resume --borrow "$OUT/results-$S.json" > "$OUT/summary-h20-$S.txt"
+      --jobs 2 --json "$OUT/h20-$S.json" --resume --borrow "$OUT/results-$S.json" > "$OUT/summary-h20-$S.txt.tmp"
+    mv "$OUT/summary-h20-$S.txt.tmp" "$OUT/summary-h20-$S.txt"
   done
 done

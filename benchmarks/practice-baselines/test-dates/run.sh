@@ -12,6 +12,7 @@ for N in 5 10; do
   for S in synthetic nyc; do
     surge evaluate --scenario "$S" --data ../shared/data --dates 2022-10-20 2022-12-08 --hours 17 19 --seeds "$N" --taxis 100 \
       --minutes 60 --forecast previous-hour --policies greedy ia surge match rebalance --jobs 2 --json "$OUT/results-$S.json" --resume \
-      > "$OUT/summary-$S.txt"
+      > "$OUT/summary-$S.txt.tmp"
+    mv "$OUT/summary-$S.txt.tmp" "$OUT/summary-$S.txt"
   done
 done
