@@ -2,7 +2,7 @@
 
 Run from the repository root: python benchmarks/practice-baselines/test-2022-11-17/summarize.py
 
-``FAST`` is today's default ``surge``, named in full. A bare ``surge`` in these files is the greedy rollout
+``FAST`` is today's default ``surge``, named in full; ``S1000`` is it with 1,000 samples. A bare ``surge`` in these files is the greedy rollout
 (``surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2``), as the files record (``surge_defaults``).
 """
 
@@ -28,6 +28,8 @@ FILES = {
     "synthetic, 20-minute rollout over rebalance at 4 hours": HERE / "h20-synthetic.json",
     "nyc (real 2022 level), 20-minute rollout over rebalance at 4 hours": HERE / "h20-nyc.json",
     "nyc (real 2022 level), main table, garces2023 at 17 and 19 h": HERE / "garces-nyc.json",
+    "synthetic, main table, default surge with 1,000 samples": HERE / "samples1000-synthetic.json",
+    "nyc (real 2022 level), main table, default surge with 1,000 samples": HERE / "samples1000-nyc.json",
     "synthetic, further test dates": HERE.parent / "test-dates" / "results-synthetic.json",
     "nyc (real 2022 level), further test dates": HERE.parent / "test-dates" / "results-nyc.json",
     "synthetic, further test dates, 20-minute rollout over rebalance": HERE.parent / "test-dates" / "h20-synthetic.json",
@@ -35,10 +37,11 @@ FILES = {
 }
 H10, H20 = "surge:base=rebalance,scope=map", "surge:base=rebalance,scope=map,horizon=20"
 FAST = H20 + ",samples=200,cap=12,adaptive=1"
+S1000 = H20 + ",samples=1000,cap=12,adaptive=1"
 PAIRS = ((FAST, "rebalance"), (FAST, "match"), (FAST, "surge"), (FAST, H20), ("surge", "rebalance"), ("surge", "match"), (H20, "rebalance"),
          (H20, "match"), (H20, "surge"), (H20, H10), (H10, "rebalance"), (H10, "surge"), ("surge", "ia"), ("rebalance", "match"), ("match", "ia"),
-         (FAST, "garces2023"))
-GAP = ("surge", "rebalance", "match", H10, H20, FAST, "garces2023")
+         (FAST, "garces2023"), (S1000, "rebalance"), (S1000, "match"), (S1000, FAST))
+GAP = ("surge", "rebalance", "match", H10, H20, FAST, "garces2023", S1000)
 
 
 def main() -> None:
