@@ -33,11 +33,12 @@ policies), :mod:`agents._decision` (the per-decision structures: nearest-request
 lists, reach and the decision minute) and this one (the rollout over samples
 and candidates).
 
-The simulations and searches called once per sample, step or taxi never
-allocate, so they are compiled without numba's reference counting
-(``_nrt=False``): with it, every call counts each array argument up and down
-atomically, on counters the kernel's threads share, and those counts took
-about a third of a rollout's time.
+Nothing in :mod:`agents._sampling`, :mod:`agents._search`, :mod:`agents._basesim`
+or :mod:`agents._iasim` allocates, so they are compiled without numba's
+reference counting (``_nrt=False``; numba refuses to compile an allocation
+there): with it, every call counts each array argument up and down atomically,
+on counters the kernel's threads share, for every sample, step and taxi, and
+those counts took about a quarter of a rollout's time.
 """
 
 from __future__ import annotations

@@ -57,6 +57,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     pl.add_argument("--horizon", type=positive, default=None, help="rollout horizon H of every rollout policy (default: each policy's)")
     pl.add_argument("--samples", type=positive, default=None, help="rollout samples of every rollout policy (default: each policy's)")
     pl.add_argument("--steps", type=positive, default=5, help="consecutive planning steps timed")
+    pl.add_argument("--rounds", type=positive, default=1,
+                    help="runs of every policy, the policies in turn, each in a fresh process; their steps are pooled (default 1)")
     pl.add_argument("--warmup", type=int, default=25, help="minutes of greedy play before timing (a mid-episode state)")
     pl.add_argument("--seed", type=int, default=0, help="seed of the fleet's initial placement")
     pl.add_argument("--policies", nargs="+", default=["surge", "garces2023"])

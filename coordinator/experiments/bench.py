@@ -56,6 +56,8 @@ class PlanBench:
     horizon: int | None = None
     samples: int | None = None
     steps: int = 5
+    #: Runs of every policy, taken in turn (A, B, A, B, …), each in a fresh process; their steps are pooled.
+    rounds: int = 1
     warmup: int = 25
     seed: int = 0
     policies: tuple[str, ...] = ("surge", "garces2023")
@@ -284,13 +286,36 @@ def _plan_child(cfg: PlanBench, label: str) -> dict:
     }
 
 
+def pool_rounds(runs: list[dict]) -> dict:
+    """One policy's runs of :func:`_plan_child` on the same states, pooled: every timed step of every run.
+
+    ``round_medians`` keeps each run's median seconds per step, so a reader sees
+    how far runs of one command differ on a noisy machine; ``same_in_every_round``
+    whether every run made the first run's decisions.
+    """
+    res = {**runs[0], "variants": {}}
+    for v, first in runs[0]["variants"].items():
+        recs = [r["variants"][v] for r in runs]
+        rec = {k: [x for r in recs for x in r[k]] for k in ("plan_seconds", "cpu_seconds", "settled_share", "shadow_share",
+                                                            "seconds_per_free_taxi")}
+        rec.update(hashes=first["hashes"], same_in_every_round=all(r["hashes"] == first["hashes"] for r in recs),
+                   plan_seconds_per_step=_stats(rec["plan_seconds"]), cpu_seconds_per_step=_stats(rec["cpu_seconds"]),
+                   round_medians=[r["plan_seconds_per_step"]["median"] for r in recs])
+        res["variants"][v] = rec
+    res.update(next(iter(res["variants"].values())))
+    res["peak_rss_mb"] = max(r["peak_rss_mb"] for r in runs)
+    return res
+
+
 def bench_plan(cfg: PlanBench) -> int:
     """Planning seconds per step of each policy (rollout or central), each in a fresh ``spawn`` process.
 
     The fleet plays greedy for ``--warmup`` minutes from a seeded placement at
     ``--date --hour`` to reach a mid-episode state; then the policy plans
     ``--steps`` consecutive steps, which are applied.  Peak RSS is that of the
-    planning process (scenario loading included).
+    planning process (scenario loading included).  With ``--rounds N`` every
+    policy runs N times, the policies in turn, so that a slow spell of a shared
+    machine falls on all of them; the steps of its runs are pooled.
     """
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
@@ -308,30 +333,35 @@ def bench_plan(cfg: PlanBench) -> int:
     out: dict = {
         "schema": "surge.bench.plan/1",
         "cpus": os.cpu_count(),
-        "config": {k: getattr(cfg, k) for k in ("scenario", "date", "hour", "taxis", "horizon", "samples", "steps", "warmup", "seed",
-                                                 "forecast", "workers", "variants")},
+        "config": {k: getattr(cfg, k) for k in ("scenario", "date", "hour", "taxis", "horizon", "samples", "steps", "rounds", "warmup",
+                                                 "seed", "forecast", "workers", "variants")},
         "policies": {},
     }
-    with steps(len(cfg.policies), "policy", "bench plan") as bar:
-        for name in cfg.policies:
-            with ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn")) as pool:
-                res = pool.submit(_plan_child, cfg, name).result()
-            out["city"] = res.pop("city")
-            out["demand_source"] = res.pop("demand_source")
-            out["policies"][name] = res
-            plan = res["rollout"]
-            what = f"{plan['base']} base, H={plan['horizon']}, {plan['samples']} samples, {res['approximations']}" if plan else "central"
-            echo(f"{name} ({what}): free taxis {res['free_taxis']}, critical path {res['critical_path']} waves, "
-                 f"peak RSS {res['peak_rss_mb']:.0f} MB, first call {res['first_call_seconds']:.2f} s")
-            for v, rec in res["variants"].items():
-                st = rec["plan_seconds_per_step"]
-                per_free = statistics.median(rec["seconds_per_free_taxi"]) * 1e3
-                same = "same decisions" if rec["hashes"] == res["hashes"] else "DIFFERENT decisions"
-                echo(f"  {v:<16} {st['median']:8.3f} s/step median (min {st['min']:.3f}, max {st['max']:.3f})  "
-                     f"{per_free:6.2f} ms per free taxi  cpu {rec['cpu_seconds_per_step']['median']:.3f} s  "
-                     f"settled {statistics.mean(rec['settled_share']):5.1%} of decisions, "
-                     f"{statistics.mean(rec['shadow_share']):5.1%} of candidate samples  {same}")
-            bar.update()
+    runs: dict[str, list[dict]] = {name: [] for name in cfg.policies}
+    with steps(cfg.rounds * len(cfg.policies), "run", "bench plan") as bar:
+        for _ in range(cfg.rounds):
+            for name in cfg.policies:
+                with ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn")) as pool:
+                    runs[name].append(pool.submit(_plan_child, cfg, name).result())
+                bar.update()
+    for name in cfg.policies:
+        res = pool_rounds(runs[name])
+        out["city"] = res.pop("city")
+        out["demand_source"] = res.pop("demand_source")
+        out["policies"][name] = res
+        plan = res["rollout"]
+        what = f"{plan['base']} base, H={plan['horizon']}, {plan['samples']} samples, {res['approximations']}" if plan else "central"
+        echo(f"{name} ({what}): free taxis {res['free_taxis']}, critical path {res['critical_path']} waves, "
+             f"peak RSS {res['peak_rss_mb']:.0f} MB, first call {res['first_call_seconds']:.2f} s")
+        for v, rec in res["variants"].items():
+            st = rec["plan_seconds_per_step"]
+            per_free = statistics.median(rec["seconds_per_free_taxi"]) * 1e3
+            same = "same decisions" if rec["hashes"] == res["hashes"] and rec["same_in_every_round"] else "DIFFERENT decisions"
+            rounds = f"  run medians {', '.join(f'{m:.3f}' for m in rec['round_medians'])}" if cfg.rounds > 1 else ""
+            echo(f"  {v:<16} {st['median']:8.3f} s/step median (min {st['min']:.3f}, max {st['max']:.3f})  "
+                 f"{per_free:6.2f} ms per free taxi  cpu {rec['cpu_seconds_per_step']['median']:.3f} s  "
+                 f"settled {statistics.mean(rec['settled_share']):5.1%} of decisions, "
+                 f"{statistics.mean(rec['shadow_share']):5.1%} of candidate samples  {same}{rounds}")
     pol = out["policies"]
     if "garces2023" in pol:
         for label in (p for p in pol if parse_policy(p)[0] == "surge"):

@@ -6,6 +6,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import statistics
 from pathlib import Path
 
 import numpy as np
@@ -182,6 +183,26 @@ def test_bench_plan_times_central_policies_beside_rollout(tmp_path: Path) -> Non
     for name in ("match", "rebalance"):
         assert res[name]["approximations"] == "exact" and res[name]["rollout"] is None
         assert res[name]["critical_path"] == [1, 1] and len(res[name]["plan_seconds"]) == 2
+
+
+def test_bench_plan_pools_rounds_taken_in_turn(tmp_path: Path) -> None:
+    """``--rounds 2``: each policy runs twice on the same states; the steps are pooled and each run's median kept."""
+    from tests.coordinator.test_cli import run_cli
+
+    out = tmp_path / "plan.json"
+    proc = run_cli("bench", "plan", "--taxis", "12", "--samples", "8", "--horizon", "3", "--steps", "2", "--warmup", "2",
+                   "--policies", "surge", "match", "--forecast", "true-rate", "--rounds", "2", "--json", str(out))
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(out.read_text())
+    assert doc["config"]["rounds"] == 2
+    for name in ("surge", "match"):
+        res = doc["policies"][name]
+        assert len(res["plan_seconds"]) == len(res["cpu_seconds"]) == 4 and len(res["round_medians"]) == 2
+        assert res["same_in_every_round"] and len(res["hashes"]) == len(res["free_taxis"]) == 2
+        assert res["plan_seconds_per_step"]["median"] == statistics.median(res["plan_seconds"])
+    assert proc.stdout.count("run medians") == 2 and "DIFFERENT" not in proc.stdout
+    bad = run_cli("bench", "plan", "--rounds", "0")
+    assert bad.returncode != 0 and "--rounds" in bad.stderr
 
 
 def test_kernel_cache_is_keyed_by_every_kernel_source(tmp_path: Path) -> None:
