@@ -2,8 +2,9 @@
 
 Run from the repository root: python benchmarks/practice-baselines/test-2022-11-17/summarize.py
 
-``FAST`` is today's default ``surge``, named in full; ``S1000`` is it with 1,000 samples. A bare ``surge`` in these files is the greedy rollout
-(``surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2``), as the files record (``surge_defaults``).
+``FAST`` is today's default ``surge``, named in full; ``S1000`` is it with 1,000 samples. A bare ``surge`` in
+these files is the greedy rollout (``surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2``),
+as the files record (``surge_defaults``).
 """
 
 from __future__ import annotations
