@@ -132,7 +132,7 @@ def simulate_greedy(
                     d = memo_d[v]
                     c2 = memo_c[v]
                 else:
-                    d, c2, _ = nearest_request(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                    d, c2, _ = nearest_request(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
                     if share:
                         memo_key[v] = tick[0]
                         memo_d[v] = d
@@ -206,7 +206,7 @@ def simulate_greedy(
             if tfree[i] <= horizon + 1 and c >= 0:
                 v = walk(v, e_pick[c] if c < r0 else a_pick[c - r0], min(horizon + 1 - kanc[i], d0[i]), hop_t)
             if tail > 0:
-                a = time_to_pickup(v, tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                a = time_to_pickup(v, tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
                 spared += (tail - a) * (tail - a)
             elif tfree[i] <= horizon + 1:
                 spared += place[v]
@@ -229,7 +229,6 @@ def shadow_greedy(
     near: np.ndarray,
     near_d: np.ndarray,
     dist: np.ndarray,
-    dist_t: np.ndarray,
     hop_t: np.ndarray,
     act: np.ndarray,
     ev_step: np.ndarray,
@@ -280,7 +279,7 @@ def shadow_greedy(
         if tgt < 0 and not need and ai == first_new:
             pass
         elif need or tgt < 0:
-            d, c2, _ = nearest_request(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+            d, c2, _ = nearest_request(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
             pos = v
             kanc = k
             tgt = c2

@@ -62,7 +62,6 @@ def simulate_ia(
     near: np.ndarray,
     near_d: np.ndarray,
     dist: np.ndarray,
-    dist_t: np.ndarray,
     hop_t: np.ndarray,
     act: np.ndarray,
     lb: np.ndarray,
@@ -117,7 +116,7 @@ def simulate_ia(
         if nf > 0 and n_alive > 0:
             for f in range(nf):
                 i = free[f]
-                best_d[f], best_c[f], lb[i] = nearest_request(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                best_d[f], best_c[f], lb[i] = nearest_request(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
                 seen[i] = ai
             # A binary heap of (distance, taxi) keys; a key whose request was taken
             # meanwhile is refreshed when it surfaces (keys only ever grow).
@@ -132,7 +131,7 @@ def simulate_ia(
                 c = best_c[f]
                 if not alive[c]:
                     i = free[f]
-                    best_d[f], best_c[f], lb[i] = nearest_request(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+                    best_d[f], best_c[f], lb[i] = nearest_request(tpos[i], lb[i], seen[i], ai, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
                     if best_c[f] >= 0:
                         n_h = _heap_push(heap, n_h, best_d[f] * mt + f)
                     continue
@@ -191,7 +190,7 @@ def simulate_ia(
     spared = 0
     if tail > 0:
         for i in range(mt):
-            a = time_to_pickup(tpos[i], tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+            a = time_to_pickup(tpos[i], tfree[i] - horizon - 1, tail, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
             spared += (tail - a) * (tail - a)
     elif place.shape[0] > 0:
         for i in range(mt):

@@ -86,7 +86,6 @@ def _first_plans(
     near: np.ndarray,
     near_d: np.ndarray,
     dist: np.ndarray,
-    dist_t: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per candidate, each taxi free at step 1: its nearest outstanding request and distance."""
     n_c, mt = pos1.shape
@@ -96,7 +95,7 @@ def _first_plans(
     for c in range(n_c):
         for i in range(mt):
             if tfree1[c, i] <= 1:
-                plan_d[c, i], plan_c[c, i], _ = nearest_request(pos1[c, i], -1, 0, 0, alive0[c], no_act, 0, near, near_d, e_pick, no_act, dist, dist_t)
+                plan_d[c, i], plan_c[c, i], _ = nearest_request(pos1[c, i], -1, 0, 0, alive0[c], no_act, 0, near, near_d, e_pick, no_act, dist)
     return plan_c, plan_d
 
 
@@ -232,7 +231,7 @@ def _run_samples(
                 alive[r0 : r0 + n_arr] = True
                 f = shadow_greedy(
                     horizon, c, ref, pos1[c, ag], plan_c[c, ag], plan_d[c, ag], alive, n_arr, a_pick, a_step,
-                    e_pick, near, near_d, dist, dist_t, hop_t, act, ev_step, ev_code, n_ev, full, rec_pos, rec_tgt, rec_t,
+                    e_pick, near, near_d, dist, hop_t, act, ev_step, ev_code, n_ev, full, rec_pos, rec_tgt, rec_t,
                 )
                 if f >= 0:
                     out[c, col] = out[f, col]
@@ -266,7 +265,7 @@ def _run_samples(
                     thome[i] = home[i] if tfree1[c, i] <= 1 else -1
                 cost, spared = simulate_ia(
                     horizon, alive, g0, tpos, tfree, n_arr, a_pick, a_drop, a_step,
-                    e_pick, e_drop, near, near_d, dist, dist_t, hop_t,
+                    e_pick, e_drop, near, near_d, dist, hop_t,
                     act, lb, seen, free, best_d, best_c, target, matched, heap, tail, place, thome,
                 )
             if tail > 0:
@@ -346,7 +345,7 @@ def rollout_costs(
     n_samples = s_hi - s_lo
     out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)
     settled = np.zeros((alive0.shape[0], n_samples), dtype=np.bool_)
-    plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist, dist_t)
+    plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist)
     n_chunks = max(1, min(n_samples, n_chunks))
     n_groups = max(1, min(n_chunks, groups))
     copies = n_groups if n_groups > 1 else 0  # one group lists in the lists themselves
@@ -420,7 +419,7 @@ def rollout_costs_serial(
     n_samples = s_hi - s_lo
     out = np.empty((alive0.shape[0], n_samples), dtype=np.int32)
     settled = np.zeros((alive0.shape[0], n_samples), dtype=np.bool_)
-    plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist, dist_t)
+    plan_c, plan_d = _first_plans(alive0, pos1, tfree1, e_pick, near, near_d, dist)
     n_chunks = max(1, min(n_samples, n_chunks))
     for chunk in range(n_chunks):
         _run_samples(

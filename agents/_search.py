@@ -48,7 +48,6 @@ def nearest_request(
     e_pick: np.ndarray,
     a_pick: np.ndarray,
     dist: np.ndarray,
-    dist_t: np.ndarray,
 ) -> tuple[int, int, int]:
     """The alive request nearest to node ``v`` by ``(distance, code)``; ``(BIG, -1)`` if none.
 
@@ -71,8 +70,8 @@ def nearest_request(
             best_d = np.int64(near_d[v, j])
             best_c = r
             break
+    row = dist[v]
     if best_c < 0 and r0 > kl:
-        row = dist[v]
         for r in range(r0):
             if alive[r]:
                 d = np.int64(row[e_pick[r]])
@@ -82,14 +81,14 @@ def nearest_request(
     if lb >= 0:
         for a in range(seen, n_seen):
             if alive[r0 + a]:
-                lb = min(lb, np.int64(dist_t[a_pick[a], v]))
+                lb = min(lb, np.int64(row[a_pick[a]]))
         if lb >= best_d:
             return best_d, best_c, lb
     arr_d = BIG_HOPS
     for j in range(n_act):
         c = act[j]
         if alive[c]:
-            d = np.int64(dist_t[a_pick[c - r0], v])
+            d = np.int64(row[a_pick[c - r0]])
             arr_d = min(arr_d, d)
             if d < best_d or (d == best_d and c < best_c):
                 best_d = d
@@ -150,7 +149,6 @@ def time_to_pickup(
     e_pick: np.ndarray,
     a_pick: np.ndarray,
     dist: np.ndarray,
-    dist_t: np.ndarray,
 ) -> int:
     """Minutes until a taxi at node ``v`` after the horizon, busy ``busy`` more minutes, can stand at the nearest waiting request; at most ``tail``.
 
@@ -158,5 +156,5 @@ def time_to_pickup(
     horizon (tracked and sampled arrivals), from ``v`` (the taxi's node, or
     its drop-off when busy); with none, ``tail``.
     """
-    d, _, _ = nearest_request(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist, dist_t)
+    d, _, _ = nearest_request(v, -1, 0, 0, alive, act, n_act, near, near_d, e_pick, a_pick, dist)
     return min(tail, max(0, busy) + d)

@@ -51,9 +51,9 @@ class City:
     sector_adj : ndarray of bool, shape (S, S)
         ``A(s)``: sectors sharing a street or a border with ``s`` (diagonal False).
     dist : ndarray of int16, shape (n, n)
-        Shortest-path hop counts.
+        Shortest-path hop counts ``i -> j``, row-major (a row is every distance from one node).
     next_hop : ndarray, shape (n, n)
-        First node after ``i`` on a shortest path ``i -> j`` (``j`` itself when ``i == j``).
+        First node after ``i`` on a shortest path ``i -> j`` (``j`` itself when ``i == j``), row-major.
     dist_m : ndarray of float32, shape (n, n)
         Length in metres of the hop-shortest path ``i -> j``.
     dist_t, next_hop_t : ndarray or None
@@ -155,9 +155,10 @@ class City:
         # for each node i, its successor on a shortest path i -> target.
         rev = csr_matrix((np.ones_like(length), (v, u)), shape=(n, n))
         hops, pred_rev = shortest_path(rev, method="D", unweighted=True, return_predecessors=True)
-        dist = hops.T.astype(np.int16)
+        # Row-major (the transposes are views): the rollout's nearest-request scans read one node's row.
+        dist = hops.T.astype(np.int16, order="C")
         idx_dtype = np.int16 if n < np.iinfo(np.int16).max else np.int32
-        next_hop = pred_rev.T.astype(idx_dtype)
+        next_hop = pred_rev.T.astype(idx_dtype, order="C")
         np.fill_diagonal(next_hop, np.arange(n, dtype=idx_dtype))
         dist_m = _path_lengths(adj, dist, next_hop)
 

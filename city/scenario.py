@@ -28,7 +28,7 @@ SCENARIOS = ("synthetic", *SHIPPED)
 #: and agent processes build the same world as the command that started them.
 SHARE_ENV = "SURGE_SHARE"
 #: Bump when a change to a city builder changes its output, so caches rebuild.
-CITY_VERSION = "3"
+CITY_VERSION = "4"
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,11 @@ def test_city_paths_on_a_line(line5: City) -> None:
     assert line5.dist_m[0, 4] == pytest.approx(400.0)
 
 
+def test_city_matrices_are_row_major(line5: City) -> None:
+    # The rollout's nearest-request scans read one node's distances as a contiguous row.
+    assert line5.dist.flags.c_contiguous and line5.next_hop.flags.c_contiguous
+
+
 def test_one_way_ring_routes_around() -> None:
     ring = line_city(4, two_way=False)
     assert ring.dist[1, 0] == 3
