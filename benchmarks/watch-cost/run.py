@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -113,7 +114,7 @@ def main() -> None:
     doc = {"question": f"the fleet's median minute with and without {what} attached",
            "command": "python benchmarks/watch-cost/run.py " + " ".join(sys.argv[1:]),
            "date": dt.datetime.now().isoformat(timespec="seconds"),
-           "machine": f"{platform.machine()}, {__import__('os').cpu_count()} vCPU, shared with other work",
+           "machine": f"{platform.machine()}, {os.cpu_count()} vCPU",
            "settings": vars(args), "runs": runs,
            "paired_median_minute_s": [{"round": r, "watched": w, "unwatched": u} for r, (w, u) in enumerate(pairs)],
            "watched_minus_unwatched_s": {"each_round": diff, "mean": float(np.mean(diff))},
