@@ -1,7 +1,8 @@
 """One simulated taxi's searches inside a rollout (numba, ``cache=True``): its nearest request, the oldest at a node,
 its walk toward a node, and the time to its next pickup; the greedy and ``ia`` simulations share them.
 
-Conventions are those of :mod:`agents._kernels`.
+Conventions are those of :mod:`agents._kernels`.  A search from node ``v`` reads ``dist[v]``, one row of a
+row-major matrix (:class:`city.graph.City`), whatever the requests it compares.
 """
 
 from __future__ import annotations

@@ -155,7 +155,7 @@ class City:
         # for each node i, its successor on a shortest path i -> target.
         rev = csr_matrix((np.ones_like(length), (v, u)), shape=(n, n))
         hops, pred_rev = shortest_path(rev, method="D", unweighted=True, return_predecessors=True)
-        # Row-major (the transposes are views): the rollout's nearest-request scans read one node's row.
+        # Row-major: the rollout's nearest-request searches read one node's row of distances.
         dist = hops.T.astype(np.int16, order="C")
         idx_dtype = np.int16 if n < np.iinfo(np.int16).max else np.int32
         next_hop = pred_rev.T.astype(idx_dtype, order="C")
