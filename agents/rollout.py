@@ -213,9 +213,9 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
     n_c, S = inp.cands.size, ctx.config.samples
     if inp.skip:
         ctx.stats.add(True, False, 0, 0)
-        return int(inp.cands[0])
+        return int(inp.cands[kept(ctx, inp.cands, np.zeros((n_c, 0), np.int64), np.zeros(n_c, np.int64), 0, agent)])
     if ctx.config.adaptive is not None:
-        return adaptive_choice(ctx, inp, serial, threads)
+        return adaptive_choice(ctx, inp, agent, serial, threads)
     if threads is None or serial:
         costs, settled = _run(ctx, inp, 0, S, np.ones(n_c, dtype=bool), serial)
     else:
@@ -224,10 +224,33 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
         costs, settled = (np.concatenate(x, axis=1) for x in zip(*parts))
     shadowed = int(settled.sum())
     ctx.stats.add(False, n_c > 1 and shadowed == (n_c - 1) * S, n_c * S - shadowed, shadowed)
-    return choose(inp.cands, costs)
+    best = int(np.argmin(costs.sum(axis=1, dtype=np.int64)))  # as :func:`choose`
+    return int(inp.cands[kept(ctx, inp.cands, costs, np.full(n_c, S), best, agent)])
 
 
-def adaptive_choice(ctx: StepContext, inp: DecisionInputs, serial: bool = False, threads: Callable[[], int] | None = None) -> int:
+def kept(ctx: StepContext, cands: np.ndarray, costs: np.ndarray, ran: np.ndarray, best: int, agent: int) -> int:
+    """The index of the candidate chosen: ``best``, or with ``config.keep`` the base policy's control unless ``best`` beats it by more than ``keep`` standard errors.
+
+    The paired differences are taken over the first ``ran[b]`` samples, those
+    the base's candidate ``b`` ran before elimination dropped it.
+    """
+    z = ctx.config.keep
+    if z is None:
+        return best
+    at = np.flatnonzero(cands == ctx.base_controls[agent])
+    if at.size == 0 or at[0] == best:
+        return best
+    b = int(at[0])
+    n = int(ran[b])
+    diff = costs[best, :n].astype(np.float64) - costs[b, :n]
+    if n < 2:
+        return b
+    mean, se = diff.mean(), diff.std(ddof=1) / np.sqrt(n)
+    return best if mean + z * se < 0 else b
+
+
+def adaptive_choice(ctx: StepContext, inp: DecisionInputs, agent: int, serial: bool = False,
+                    threads: Callable[[], int] | None = None) -> int:
     """Successive elimination with common random numbers, deterministic for a seed.
 
     After each batch, the best candidate is the one of least total cost over
@@ -243,6 +266,7 @@ def adaptive_choice(ctx: StepContext, inp: DecisionInputs, serial: bool = False,
     n_c = inp.cands.size
     active = np.ones(n_c, dtype=bool)
     costs = np.zeros((n_c, cfg.samples), dtype=np.int64)
+    ran = np.zeros(n_c, dtype=np.int64)
     run = shadowed = 0
     lo, left = 0, n_c
     while lo < cfg.samples and left > 1:
@@ -252,10 +276,11 @@ def adaptive_choice(ctx: StepContext, inp: DecisionInputs, serial: bool = False,
         run += left * (hi - lo) - done
         shadowed += done
         costs[:, lo:hi] = part
+        ran[active] = hi
         lo = hi
         left = eliminate(costs, lo, active, cfg.adaptive)
     ctx.stats.add(False, False, run, shadowed)
-    return int(inp.cands[best_candidate(costs, lo, active)])
+    return int(inp.cands[kept(ctx, inp.cands, costs, ran, best_candidate(costs, lo, active), agent)])
 
 
 def warm_up(city: City | None = None, config: RolloutConfig | None = None, serial: bool = False) -> None:

@@ -82,6 +82,15 @@ class RolloutConfig:
         forecast puts demand.  An alternative to ``tail``; with either the
         exact shortcuts that leave out taxis unable to pick up, or replay the
         agent alone, are off.
+    keep : float or None
+        Keep the base policy's control unless the best candidate beats it by
+        more than ``keep`` standard errors of their mean paired difference
+        (over the samples both ran); ``None``, the default, takes the best
+        candidate whatever the margin.  A rollout's Monte-Carlo minimum is
+        biased low: with a few hundred samples a candidate can look better
+        than the base's control by chance, and following the base where the
+        samples cannot tell them apart keeps the rollout from doing worse
+        than its base through noise alone.
     """
 
     horizon: int = 10
@@ -97,6 +106,7 @@ class RolloutConfig:
     tail: int = 0
     cycle: int = 10
     place: int = 0
+    keep: float | None = None
 
     def __post_init__(self) -> None:
         if self.horizon < 1 or self.samples < 1:
@@ -119,6 +129,8 @@ class RolloutConfig:
             raise ConfigError(f"rollout: place must be non-negative, got {self.place}")
         if self.place and self.tail:
             raise ConfigError("rollout: tail and place are alternatives; set one of them")
+        if self.keep is not None and not self.keep >= 0:
+            raise ConfigError(f"rollout: keep must be a non-negative number of standard errors, got {self.keep}")
         if self.batch < 2:
             raise ConfigError(f"rollout: batch must be at least 2 samples, got {self.batch}")
 

@@ -98,6 +98,8 @@ class RolloutPolicy(Policy):
         Option("tail", int, low=0, high=240, help="minutes after the horizon valued by a fluid terminal cost (0: none)"),
         Option("cycle", int, low=1, high=240, help="minutes per pickup of a taxi in the tail"),
         Option("place", int, low=0, high=1000, help="tenths of a request-minute per hop of the free taxis' end distance to forecast demand (0: none)"),
+        Option("keep", float, low=0, words={"none": None},
+               help="keep the base policy's control unless a candidate beats it by this many standard errors"),
         Option("workers", int, low=1, help="threads planning independent agents of a minute concurrently"),
     )
     shortcuts: Shortcuts = Shortcuts()
@@ -137,6 +139,7 @@ class RolloutPolicy(Policy):
         tail: int | None = None,
         cycle: int | None = None,
         place: int | None = None,
+        keep: float | None | object = DEFAULT,
     ) -> RolloutConfig:
         """The planner settings of this policy with the options not given at its defaults; no forecast is loaded.
 
@@ -146,6 +149,7 @@ class RolloutPolicy(Policy):
         d = cls.defaults
         cap = d["cap"] if cap is DEFAULT else cap
         adaptive = d["adaptive"] if adaptive is DEFAULT else adaptive
+        keep = d.get("keep") if keep is DEFAULT else keep
         H = int(horizon if horizon is not None else d["horizon"])
         return RolloutConfig(
             horizon=H,
@@ -161,6 +165,7 @@ class RolloutPolicy(Policy):
             tail=int(tail if tail is not None else d.get("tail", 0)),
             cycle=int(cycle if cycle is not None else d.get("cycle", 10)),
             place=int(place if place is not None else d.get("place", 0)),
+            keep=None if keep is None else float(keep),
         )
 
     def reset(self, context: EpisodeContext) -> None:

@@ -29,6 +29,10 @@ NAMES = {H20: "the full rollout", FAST: "the default (all three)", H20 + ",sampl
          H20 + ",samples=200,cap=24,adaptive=1": "cap=24 (not 12)", H20 + ",samples=200,cap=12,adaptive=2": "adaptive=2 (not 1)"}
 
 
+#: The four hours of the validation runs of ``keep`` (the others ran at 17 and 19 h).
+ALL_HOURS = (15, 17, 19, 21)
+
+
 def load() -> dict[str, dict[tuple, dict]]:
     """Per map, episode rows keyed by (date, hour, seed, policy)."""
     out: dict[str, dict[tuple, dict]] = defaultdict(dict)
@@ -39,7 +43,8 @@ def load() -> dict[str, dict[tuple, dict]]:
         # The real map at its real 2022 hourly level is another world than at its 2018 zone-profile level.
         world = doc["scenario"] + (" (real level)" if doc.get("demand_source", "").startswith("hourly-totals") else "")
         for e in doc["episodes"]:
-            out[world][(e["date"], e["hour"], e["seed"], e["policy"])] = e
+            # An episode that two files ran (the same costs: runs are deterministic) is read from the first.
+            out[world].setdefault((e["date"], e["hour"], e["seed"], e["policy"]), e)
     return out
 
 
@@ -55,8 +60,8 @@ def pair(rows: dict[tuple, dict], a: str, b: str, hours: tuple[int, ...] | None 
     keys = sorted({k[:3] for k in rows if k[3] == a} & {k[:3] for k in rows if k[3] == b})
     if hours is not None:
         keys = [k for k in keys if k[1] in hours]
-    if not keys:
-        return None
+    if not keys or (hours is not None and {k[1] for k in keys} != set(hours)):
+        return None  # pooled over every hour asked for, or not at all
     res: dict = {"variant": a, "reference": b, "n": len(keys)}
     for part, lo, hi in (("total", 0, None), ("minutes_0_19", 0, 20), ("minutes_20_59", 20, None)):
         d = np.array([sum(rows[k + (a,)]["stage_costs"][lo:hi]) - sum(rows[k + (b,)]["stage_costs"][lo:hi]) for k in keys], float)
@@ -75,7 +80,7 @@ def main() -> None:
     for scen, rows in sorted(data.items()):
         labels = sorted({k[3] for k in rows})
         refs = [r for r in labels if r.startswith(("rebalance", "match"))] + [r for r in ("surge:forecast=previous-hour", "ia", H20, FAST) if r in labels]
-        for hours in ((17, 19), (17,), (19,)):
+        for hours in ((17, 19), (17,), (19,), ALL_HOURS, (15,), (21,)):
             for v in labels:
                 variant_of_h20 = v.startswith(H20 + ",")
                 for r in refs:
@@ -85,7 +90,9 @@ def main() -> None:
                     if res is None:
                         continue
                     res.update(scenario=scen, hours=list(hours))
-                    if variant_of_h20 and r in (H20, FAST):
+                    if v.startswith(FAST + ",keep="):
+                        res.update(family="keep", reference_name=NAMES.get(r, f"`{r.split(':')[0]}`"), variant_name=v[len(FAST) + 1:])
+                    elif variant_of_h20 and r in (H20, FAST):
                         res.update(family="approximations", reference_name=NAMES[r], variant_name=NAMES.get(v, v[len(H20) + 1:]))
                     out.append(res)
                     t, f, s = res["total"], res["minutes_0_19"], res["minutes_20_59"]

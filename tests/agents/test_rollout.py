@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from agents.rollout import (
     RolloutConfig,
     agent_costs,
     choose,
+    kept,
     plan_agent,
     prepare_step,
 )
@@ -206,6 +208,27 @@ def test_ties_prefer_stay_then_pickup_then_lowest_node() -> None:
     assert choose(cands, np.array([[5, 5], [4, 6], [3, 7], [6, 4]])) == 4
     assert choose(cands, np.array([[9, 9], [5, 5], [3, 7], [6, 4]])) == PICKUP
     assert choose(cands, np.array([[9, 9], [9, 9], [3, 7], [6, 4]])) == 3
+
+
+def test_keep_follows_the_base_unless_a_candidate_beats_it_by_keep_standard_errors() -> None:
+    cands = np.array([4, PICKUP, 3, 5], np.int32)
+
+    def ctx(keep):
+        return SimpleNamespace(config=RolloutConfig(keep=keep), base_controls=np.array([0, 3], np.int32))
+
+    noisy = np.array([[5, 7, 5, 7], [9, 9, 9, 9], [6, 6, 6, 6], [9, 9, 9, 9]])  # best - base: -1, +1, -1, +1
+    clear = np.array([[4, 4, 4, 5], [9, 9, 9, 9], [6, 6, 6, 6], [9, 9, 9, 9]])  # -2, -2, -2, -1: mean -1.75, se 0.25
+    four = np.full(4, 4)
+    assert kept(ctx(None), cands, noisy, four, 0, 1) == 0
+    assert kept(ctx(0.0), cands, noisy, four, 0, 1) == 2  # a mean of zero is no gain
+    assert kept(ctx(1.0), cands, clear, four, 0, 1) == 0
+    assert kept(ctx(6.9), cands, clear, four, 0, 1) == 0 and kept(ctx(7.0), cands, clear, four, 0, 1) == 2
+    # The base's candidate dropped after two samples: only those two count (the rest of its row is unset).
+    dropped = clear.copy()
+    dropped[2, 2:] = 0
+    assert kept(ctx(1.0), cands, dropped, np.array([4, 4, 2, 4]), 0, 1) == 0  # -2, -2 over the two it ran; all four: +0.75
+    assert kept(ctx(1.0), cands, clear, four, 2, 1) == 2  # the base's control is the best
+    assert kept(ctx(1.0), cands, clear, four, 0, 0) == 0  # base control 0 is not a candidate: the best
 
 
 def test_limited_certainty_equivalence_rounds_or_draws_bernoulli() -> None:

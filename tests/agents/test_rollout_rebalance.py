@@ -125,3 +125,17 @@ def test_surge_with_the_rebalance_base_is_deterministic_per_seed() -> None:
             for _ in range(2)]
     assert runs[0].decisions_sha256 == runs[1].decisions_sha256
     assert runs[0].total_cost == runs[1].total_cost
+
+
+def test_surge_keeping_the_base_control_against_any_margin_is_rebalance() -> None:
+    """With ``keep`` beyond any margin the samples can show, every decision is the base's: ``rebalance``'s, bit for bit."""
+    city = grid_city(6, 6)
+    rng = np.random.default_rng(4)
+    reqs = Requests.sorted(rng.integers(0, 36, 40), rng.integers(0, 36, 40), rng.integers(0, 12, 40))
+    start = rng.integers(0, 36, 9).astype(np.int32)
+    ctx = EpisodeContext(city=city, date=DATE, hour=19, minutes=12, seed=0, world=StubWorld(city, 12.0))
+    opts = dict(forecast="true-rate", base="rebalance", horizon=4, samples=40, seed=5)
+    runs = {keep: run_episode(city, make_policy("surge", city, keep=keep, **opts), reqs, start, ctx) for keep in (None, 1e9)}
+    plain = run_episode(city, make_policy("rebalance", city, forecast="true-rate"), reqs, start, ctx)
+    assert runs[1e9].decisions_sha256 == plain.decisions_sha256
+    assert runs[None].decisions_sha256 != plain.decisions_sha256, "the rollout never left the base: the test checks nothing"

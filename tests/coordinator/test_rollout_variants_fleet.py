@@ -1,6 +1,8 @@
-"""``surge`` variants in the distributed fleet (a tail, place values, the rebalance base): one process per taxi over a real zenoh router, the in-process decisions."""
+"""``surge`` variants in the distributed fleet (a tail, place values, the rebalance base, keeping the base's control): one process per taxi over a real zenoh router, the in-process decisions."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import pytest
 
@@ -10,7 +12,7 @@ from coordinator.run_config import FleetConfig
 pytestmark = pytest.mark.usefixtures("compiled_kernels")
 
 
-@pytest.mark.parametrize("end", [{"tail": 20, "cycle": 8}, {"place": 2}, {"base": "rebalance"}])
+@pytest.mark.parametrize("end", [{"tail": 20, "cycle": 8}, {"place": 2}, {"base": "rebalance"}, {"base": "rebalance", "keep": 2.0}])
 def test_distributed_surge_variants_make_the_in_process_decisions(end: dict) -> None:
     """The variant travels in the run spec's rollout settings; every agent plans with it, the place
     values from the forecast of its own sectors, the rebalance base with the targets each state carries."""
@@ -23,3 +25,6 @@ def test_distributed_surge_variants_make_the_in_process_decisions(end: dict) -> 
     assert sum(dist["planned_per_agent"]) > 0
     assert dist["decisions_sha256"] == ref["decisions_sha256"]
     assert dist["total_cost"] == ref["total_cost"] and dist["served"] == ref["served"]
+    if "keep" in end:  # the agents kept base controls that the rollout alone would have left
+        plain = in_process(dataclasses.replace(cfg, options={k: v for k, v in cfg.options.items() if k != "keep"}))
+        assert plain["decisions_sha256"] != ref["decisions_sha256"]

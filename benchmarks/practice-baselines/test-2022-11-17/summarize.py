@@ -2,7 +2,7 @@
 
 Run from the repository root: python benchmarks/practice-baselines/test-2022-11-17/summarize.py
 
-``FAST`` is today's default ``surge``, named in full; ``S1000`` is it with 1,000 samples. A bare ``surge`` in
+``FAST`` is today's default ``surge``, named in full; ``S1000`` is it with 1,000 samples, ``KEEP`` with ``keep=2``. A bare ``surge`` in
 these files is the greedy rollout (``surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2``),
 as the files record (``surge_defaults``).
 """
@@ -31,18 +31,24 @@ FILES = {
     "nyc (real 2022 level), main table, garces2023 at 17 and 19 h": HERE / "garces-nyc.json",
     "synthetic, main table, default surge with 1,000 samples": HERE / "samples1000-synthetic.json",
     "nyc (real 2022 level), main table, default surge with 1,000 samples": HERE / "samples1000-nyc.json",
+    "synthetic, main table, default surge with keep=2": HERE / "keep-synthetic.json",
+    "nyc (real 2022 level), main table, default surge with keep=2": HERE / "keep-nyc.json",
     "synthetic, further test dates": HERE.parent / "test-dates" / "results-synthetic.json",
     "nyc (real 2022 level), further test dates": HERE.parent / "test-dates" / "results-nyc.json",
     "synthetic, further test dates, 20-minute rollout over rebalance": HERE.parent / "test-dates" / "h20-synthetic.json",
     "nyc (real 2022 level), further test dates, 20-minute rollout over rebalance": HERE.parent / "test-dates" / "h20-nyc.json",
+    "synthetic, further test dates, default surge with keep=2": HERE.parent / "test-dates" / "keep-synthetic.json",
+    "nyc (real 2022 level), further test dates, default surge with keep=2": HERE.parent / "test-dates" / "keep-nyc.json",
 }
 H10, H20 = "surge:base=rebalance,scope=map", "surge:base=rebalance,scope=map,horizon=20"
 FAST = H20 + ",samples=200,cap=12,adaptive=1"
 S1000 = H20 + ",samples=1000,cap=12,adaptive=1"
+KEEP = FAST + ",keep=2"
 PAIRS = ((FAST, "rebalance"), (FAST, "match"), (FAST, "surge"), (FAST, H20), ("surge", "rebalance"), ("surge", "match"), (H20, "rebalance"),
          (H20, "match"), (H20, "surge"), (H20, H10), (H10, "rebalance"), (H10, "surge"), ("surge", "ia"), ("rebalance", "match"), ("match", "ia"),
-         (FAST, "garces2023"), (S1000, "rebalance"), (S1000, "match"), (S1000, FAST))
-GAP = ("surge", "rebalance", "match", H10, H20, FAST, "garces2023", S1000)
+         (FAST, "garces2023"), (S1000, "rebalance"), (S1000, "match"), (S1000, FAST),
+         (KEEP, "rebalance"), (KEEP, "match"), (KEEP, FAST))
+GAP = ("surge", "rebalance", "match", H10, H20, FAST, "garces2023", S1000, KEEP)
 
 
 def main() -> None:
@@ -62,7 +68,7 @@ def main() -> None:
             common = complete_seeds(common_instances(doc, GAP))
             gap = {f"{r['hour']} {r['policy']}": r["gap_closed"] for r in summarize(common) if r["policy"] in GAP}
             entry["dates"][date] = {"seeds": sorted({e["seed"] for e in doc["episodes"]}), "pairs": pairs,
-                                    "verdicts": {p: against_practice(doc, p) for p in ("surge", FAST) if p in doc["config"]["policies"]}, "gap_closed": gap}
+                                    "verdicts": {p: against_practice(doc, p) for p in ("surge", FAST, KEEP) if p in doc["config"]["policies"]}, "gap_closed": gap}
             for r in pairs:
                 print(f"{name} {date} {r['hour']}h {r['policy']} − {r['against']}: {r['cost_difference']:+.1f} "
                       f"[{r['ci95'][0]:+.1f}, {r['ci95'][1]:+.1f}], wins {r['wins']}/{r['n']}")
