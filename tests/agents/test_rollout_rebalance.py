@@ -115,12 +115,17 @@ def test_rebalance_base_needs_the_hour_and_every_target() -> None:
         prepare_step(city, cfg, obs, tables, 5, base=np.zeros(4, np.int32), home=np.zeros(2, np.int32))
 
 
-def test_surge_with_the_rebalance_base_is_deterministic_per_seed() -> None:
+def grid_episode(seed: int, requests: int):
+    """A 12-minute episode of 9 taxis on a 6 × 6 grid: the city, its requests, the start and the context."""
     city = grid_city(6, 6)
-    rng = np.random.default_rng(11)
-    reqs = Requests.sorted(rng.integers(0, 36, 30), rng.integers(0, 36, 30), rng.integers(0, 12, 30))
+    rng = np.random.default_rng(seed)
+    reqs = Requests.sorted(rng.integers(0, 36, requests), rng.integers(0, 36, requests), rng.integers(0, 12, requests))
     start = rng.integers(0, 36, 9).astype(np.int32)
-    ctx = EpisodeContext(city=city, date=DATE, hour=19, minutes=12, seed=0, world=StubWorld(city, 12.0))
+    return city, reqs, start, EpisodeContext(city=city, date=DATE, hour=19, minutes=12, seed=0, world=StubWorld(city, 12.0))
+
+
+def test_surge_with_the_rebalance_base_is_deterministic_per_seed() -> None:
+    city, reqs, start, ctx = grid_episode(11, 30)
     runs = [run_episode(city, make_policy("surge", city, forecast="true-rate", base="rebalance", horizon=4, samples=50, seed=5), reqs, start, ctx)
             for _ in range(2)]
     assert runs[0].decisions_sha256 == runs[1].decisions_sha256
@@ -129,11 +134,7 @@ def test_surge_with_the_rebalance_base_is_deterministic_per_seed() -> None:
 
 def test_surge_keeping_the_base_control_against_any_margin_is_rebalance() -> None:
     """With ``keep`` beyond any margin the samples can show, every decision is the base's: ``rebalance``'s, bit for bit."""
-    city = grid_city(6, 6)
-    rng = np.random.default_rng(4)
-    reqs = Requests.sorted(rng.integers(0, 36, 40), rng.integers(0, 36, 40), rng.integers(0, 12, 40))
-    start = rng.integers(0, 36, 9).astype(np.int32)
-    ctx = EpisodeContext(city=city, date=DATE, hour=19, minutes=12, seed=0, world=StubWorld(city, 12.0))
+    city, reqs, start, ctx = grid_episode(4, 40)
     opts = dict(forecast="true-rate", base="rebalance", horizon=4, samples=40, seed=5)
     runs = {keep: run_episode(city, make_policy("surge", city, keep=keep, **opts), reqs, start, ctx) for keep in (None, 1e9)}
     plain = run_episode(city, make_policy("rebalance", city, forecast="true-rate"), reqs, start, ctx)
