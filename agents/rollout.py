@@ -70,7 +70,7 @@ import numba
 import numpy as np
 
 from agents import _kernels as K
-from agents._adaptive import best_candidate, eliminate
+from agents._adaptive import best_candidate, eliminate, paired_stats
 from agents.demand_tables import DemandTables
 from agents.greedy import greedy_controls
 from agents.ia import ia_controls
@@ -179,10 +179,14 @@ def agent_costs(ctx: StepContext, committed: np.ndarray, agent: int) -> tuple[np
     return inp.cands, costs
 
 
+def least_total(costs: np.ndarray) -> int:
+    """The index of the candidate of least total cost over samples; the first on ties."""
+    return int(np.argmin(costs.sum(axis=1, dtype=np.int64)))
+
+
 def choose(cands: np.ndarray, costs: np.ndarray) -> int:
     """The candidate of least total cost over samples; the first in ``cands`` order on ties."""
-    totals = costs.sum(axis=1, dtype=np.int64)
-    return int(cands[int(np.argmin(totals))])
+    return int(cands[least_total(costs)])
 
 
 #: Chunks of samples an agent that shares its host's cores runs, each on the threads its share allows then.
@@ -213,6 +217,7 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
     n_c, S = inp.cands.size, ctx.config.samples
     if inp.skip:
         ctx.stats.add(True, False, 0, 0)
+        # No candidate can change a cost: with ``keep`` that is no margin at all, so the base's control.
         return int(inp.cands[kept(ctx, inp.cands, np.zeros((n_c, 0), np.int64), np.zeros(n_c, np.int64), 0, agent)])
     if ctx.config.adaptive is not None:
         return adaptive_choice(ctx, inp, agent, serial, threads)
@@ -224,29 +229,25 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
         costs, settled = (np.concatenate(x, axis=1) for x in zip(*parts))
     shadowed = int(settled.sum())
     ctx.stats.add(False, n_c > 1 and shadowed == (n_c - 1) * S, n_c * S - shadowed, shadowed)
-    best = int(np.argmin(costs.sum(axis=1, dtype=np.int64)))  # as :func:`choose`
-    return int(inp.cands[kept(ctx, inp.cands, costs, np.full(n_c, S), best, agent)])
+    return int(inp.cands[kept(ctx, inp.cands, costs, np.full(n_c, S), least_total(costs), agent)])
 
 
 def kept(ctx: StepContext, cands: np.ndarray, costs: np.ndarray, ran: np.ndarray, best: int, agent: int) -> int:
     """The index of the candidate chosen: ``best``, or with ``config.keep`` the base policy's control unless ``best`` beats it by more than ``keep`` standard errors.
 
     The paired differences are taken over the first ``ran[b]`` samples, those
-    the base's candidate ``b`` ran before elimination dropped it.
+    the base's candidate ``b`` ran before elimination dropped it; ``best`` wins
+    exactly when :func:`agents._adaptive.eliminate` at ``keep`` would drop ``b``.
     """
     z = ctx.config.keep
-    if z is None:
-        return best
     at = np.flatnonzero(cands == ctx.base_controls[agent])
-    if at.size == 0 or at[0] == best:
+    if z is None or at.size == 0 or at[0] == best:
         return best
-    b = int(at[0])
-    n = int(ran[b])
-    diff = costs[best, :n].astype(np.float64) - costs[b, :n]
+    b, n = int(at[0]), int(ran[at[0]])
     if n < 2:
         return b
-    mean, se = diff.mean(), diff.std(ddof=1) / np.sqrt(n)
-    return best if mean + z * se < 0 else b
+    mean, se = paired_stats(np.asarray(costs, dtype=np.int64), n, best)
+    return best if mean[b] - z * se[b] > 0 else b
 
 
 def adaptive_choice(ctx: StepContext, inp: DecisionInputs, agent: int, serial: bool = False,
