@@ -279,9 +279,9 @@ class RolloutPolicy(Policy):
 #: records no ``surge_defaults``, written by surge 0.1).
 EXACT: dict[str, Any] = {"cap": None, "adaptive": None, "batch": 100}
 
-#: The paper's configuration besides the approximations: the greedy rollout.  A results file that records only
-#: the approximations among ``surge``'s defaults planned with it.
-GREEDY_ROLLOUT: dict[str, Any] = {"horizon": 10, "samples": 1000, "base": "greedy", "scope": "local"}
+#: The paper's configuration besides the approximations: the greedy rollout, which always takes its best candidate
+#: (no ``keep``).  An option a results file's ``surge_defaults`` does not record was planned with its value here.
+GREEDY_ROLLOUT: dict[str, Any] = {"horizon": 10, "samples": 1000, "base": "greedy", "scope": "local", "keep": None}
 
 #: The paper's method as the paper plans it: with these options a ``surge`` label plans as the paper does.
 PAPER: dict[str, Any] = {**GREEDY_ROLLOUT, **EXACT}
@@ -291,12 +291,14 @@ PAPER: dict[str, Any] = {**GREEDY_ROLLOUT, **EXACT}
 class Surge(RolloutPolicy):
     """The paper's method rolled out over ``rebalance`` for 20 minutes; limited CE, whole-map sampling, event-informed forecast.
 
+    An agent keeps ``rebalance``'s control unless a candidate beats it by 2
+    standard errors (``keep``), so sampling noise does not steer it off its base.
     The paper's own configuration is :data:`PAPER`.
     """
 
     name = "surge"
     defaults: ClassVar[dict[str, Any]] = {"forecast": "model", "horizon": 20, "samples": 200, "base": "rebalance", "scope": "map",
-                                          "ce": "limited", "cap": 12, "adaptive": 1.0, "batch": 50}
+                                          "ce": "limited", "cap": 12, "adaptive": 1.0, "batch": 50, "keep": 2.0}
 
 
 @register

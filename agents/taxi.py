@@ -128,6 +128,9 @@ class TaxiAgent(Joining):
         #: The minute whose turn made this taxi ask the coordinator for missing forecast pieces (once a turn).
         self.asked: int | None = None
         self.context: StepContext | None = None
+        #: Whether the view is a snapshot taken before the coordinator held its minute's forecast: its base controls are
+        #: stand-ins (every free taxi stays) until the minute's published state replaces them, and no turn is planned on it.
+        self.provisional = False
         self.decisions = 0
         #: Whether the run's policy is computed by the coordinator (:attr:`agents.base.Policy.central`); set by the spec.
         self.central = False
@@ -207,13 +210,15 @@ class TaxiAgent(Joining):
                 self._current(state.epoch, key, "snapshot")
                 if not state.full:
                     raise WireError(f"{key}: a snapshot's state must be full")
-                if snap.forecast:  # empty before the run's first minute
-                    self._on_forecast(decode(snap.forecast, ForecastMsg, key))  # type: ignore[arg-type]
+                forecast = decode(snap.forecast, ForecastMsg, key) if snap.forecast else None  # none before the run's first minute
+                if forecast is not None:
+                    self._on_forecast(forecast)  # type: ignore[arg-type]
             except Exception as exc:  # a bad snapshot: drop it, try the next answer
                 self.rejected.exception("snapshot", key, exc)
                 continue
             self.view.apply(state)
             self.context = None
+            self.provisional = not self.central and (forecast is None or forecast.hour != state.t // 60)  # type: ignore[attr-defined]
             self._follow()
             self._ack()
             return
@@ -259,6 +264,7 @@ class TaxiAgent(Joining):
             msg = check_state(decode(payload, State, key), key, self.bounds)  # type: ignore[arg-type]
             self._current(msg.epoch, key, "state")
             if self.view.apply(msg):
+                self.provisional = False
                 self._follow()
                 self._ack()
             else:
@@ -362,7 +368,7 @@ class TaxiAgent(Joining):
     def _prepare(self) -> None:
         """Build the minute's shared context as soon as the state and forecast are in, while earlier agents plan."""
         obs = self.view.obs
-        if obs is None or obs.tau[self.me] > 0 or self.central:
+        if obs is None or obs.tau[self.me] > 0 or self.central or self.provisional:
             return
         if self.context is None or self.context.obs.t != obs.t:
             hour, sectors = int(obs.t) // 60, needed_sectors(self.city, self.rollout, int(obs.pos[self.me]))

@@ -22,10 +22,11 @@ from scipy import stats
 HERE = Path(__file__).parent
 #: The rollout over ``rebalance`` chosen here; its cheaper approximations are paired with it too.
 H20 = "surge:forecast=previous-hour,base=rebalance,scope=map,horizon=20"
-#: Its fast variant, today's default ``surge``: the variants with one approximation off are paired with it too.
+#: Its fast variant, ``surge:keep=none`` (``surge`` is it with ``keep=2``): the variants with one approximation off and those
+#: with ``keep`` are paired with it too.
 FAST = H20 + ",samples=200,cap=12,adaptive=1"
 #: How the results page names the 20-minute rollout's variants: by the approximation each turns off.
-NAMES = {H20: "the full rollout", FAST: "the default (all three)", H20 + ",samples=1000,cap=12,adaptive=1": "samples=1000 (not 200)",
+NAMES = {H20: "the full rollout", FAST: "`surge:keep=none` (all three)", H20 + ",samples=1000,cap=12,adaptive=1": "samples=1000 (not 200)",
          H20 + ",samples=200,cap=24,adaptive=1": "cap=24 (not 12)", H20 + ",samples=200,cap=12,adaptive=2": "adaptive=2 (not 1)"}
 
 

@@ -1,8 +1,9 @@
 #!/bin/sh
-# The default surge with keep=2 (chosen on validation data in benchmarks/rollout-variants/) on the warm-start protocol of
-# run.sh: the same instances, every other row borrowed from results-*.json (not run again). Each policy starts hour h
-# where it left the fleet after driving hour h-1 from the seed's random start. Seeds come in rounds (ROUNDS, default
-# "5 10"), both maps in turn; a rerun resumes.
+# surge (KEEP: FAST with keep=2, chosen on validation data in benchmarks/rollout-variants/) on the warm-start protocol
+# of run.sh; FAST, without keep, is surge:keep=none (these files record no keep). The same instances, every other row
+# borrowed from results-*.json (not run again). Each policy starts hour h where it left the fleet after driving hour h-1
+# from the seed's random start. Seeds come in rounds (ROUNDS, default "5 10"), both maps in turn; a rerun resumes.
+# To run this script again, name every label in full: see "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
 set -e
 cd "$(dirname "$0")/../.."
 OUT=benchmarks/warm-start

@@ -3,8 +3,9 @@
 # hour h-1 from the seed's random start. 17 and 19 h, 100 taxis, both maps, previous-hour demand for every policy.
 # Seeds come in rounds (1, 3, 6, 10) on both maps in turn, so that a run cut short holds whole seeds on both.
 # SURGE overrides the command (default: surge), e.g. SURGE="python -m coordinator.cli". A bare `surge` in these files is the
-# greedy rollout (they record it as surge's defaults); FAST is today's default surge, named in full.
-# To rerun these files under today's defaults see "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
+# greedy rollout (they record it as surge's defaults); FAST, named in full, is surge:keep=none (the files record no keep).
+# surge itself (FAST,keep=2) runs in run-keep.sh. To run this script again, name every label in full: see "Labels" in
+# benchmarks/practice-baselines/test-2022-11-17/README.md.
 set -e
 cd "$(dirname "$0")/../.."
 OUT=benchmarks/warm-start

@@ -58,7 +58,7 @@ def one_run(args: argparse.Namespace, watched: bool, tmp: Path) -> dict:
     try:
         wait_for_tcp("127.0.0.1", port, 60)
         coord = subprocess.Popen([*CLI, "coordinator", *bus, "--run", run, "--taxis", str(args.taxis), "--minutes", str(args.minutes),
-                                  "--hour", "19", "--forecast", "previous-hour", "--samples", str(args.samples), "--join-timeout", "600",
+                                  "--hour", "19", "--policy", args.policy, "--forecast", "previous-hour", "--samples", str(args.samples), "--join-timeout", "600",
                                   "--json", str(result)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         procs.append(coord)
         if watched:
@@ -97,6 +97,7 @@ def main() -> None:
     p.add_argument("--taxis", type=int, default=20)
     p.add_argument("--minutes", type=int, default=20)
     p.add_argument("--samples", type=int, default=200)
+    p.add_argument("--policy", default="surge", help="every taxi's policy, with options as in surge evaluate")
     p.add_argument("--rounds", type=int, default=2)
     p.add_argument("--no-browser", dest="browser", action="store_false", help="attach the watch server without a browser")
     p.add_argument("--json", required=True)

@@ -52,10 +52,11 @@ HEADER = ["# Results", "",
           "do not edit this page by hand. Each section names its command, the date it ran, the machine kind",
           "and its result files. Timings compare only within a section (one machine); costs, decisions and",
           "percent errors do not depend on the machine.", "",
-          "`surge` is the default rollout (over `rebalance`, 20 minutes, 200 samples, `cap=12`, `adaptive=1`).",
-          "A results file records the `surge` defaults it ran with and reads with them: where they were those",
-          "of the *greedy rollout* (the paper's configuration: greedy base, 10 minutes, local sampling, 1,000",
-          "samples, `cap=24`, `adaptive=2`), a `surge` label names what it changes from the greedy rollout.", ""]
+          "`surge` is the default rollout (over `rebalance`, 20 minutes, 200 samples, `cap=12`, `adaptive=1`,",
+          "`keep=2`). A results file records the `surge` defaults it ran with and reads with them: where they",
+          "were those of the *greedy rollout* (the paper's configuration: greedy base, 10 minutes, local",
+          "sampling, 1,000 samples, `cap=24`, `adaptive=2`), a `surge` label names what it changes from the",
+          "greedy rollout; where they had no `keep`, a label without it planned as `keep=none`.", ""]
 
 
 def renderer(kind: str) -> Callable[[Callable[[Section], list[str]]], Callable[[Section], list[str]]]:

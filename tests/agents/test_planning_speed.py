@@ -127,9 +127,9 @@ GREEDY_LOCAL = {"base": "greedy", "scope": "local"}
 
 
 @pytest.mark.parametrize(("name", "options", "approx"), [
-    ("surge", {**EXACT, **GREEDY_LOCAL}, GREEDY_LOCAL),
-    ("surge", {"batch": 16, **GREEDY_LOCAL}, {"adaptive": 1.0, "batch": 16, "cap": 12, **GREEDY_LOCAL}),  # the approximations, in several batches
-    ("surge", {"batch": 16}, {"adaptive": 1.0, "batch": 16, "cap": 12, "base": "rebalance", "scope": "map"}),  # surge's defaults
+    ("surge", {**EXACT, **GREEDY_LOCAL, "keep": None}, GREEDY_LOCAL),
+    ("surge", {"batch": 16, **GREEDY_LOCAL}, {"adaptive": 1.0, "batch": 16, "cap": 12, "keep": 2.0, **GREEDY_LOCAL}),  # the approximations, in several batches
+    ("surge", {"batch": 16}, {"adaptive": 1.0, "batch": 16, "cap": 12, "keep": 2.0, "base": "rebalance", "scope": "map"}),  # surge's defaults
     ("garces2023", {}, {"base": "ia", "scope": "map", "ce": "standard"}),
 ])
 def test_waves_match_sequential_turns(city: City, name: str, options: dict, approx: dict) -> None:

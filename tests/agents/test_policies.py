@@ -114,18 +114,20 @@ def test_surge_plans_over_rebalance_by_default_and_as_the_paper_with_its_options
 
     surge, garces = policy_class("surge"), policy_class("garces2023")
     c = surge.rollout_config()
-    assert (c.base, c.scope, c.horizon, c.samples, c.adaptive, c.batch, c.cap) == ("rebalance", "map", 20, 200, 1.0, 50, 12)
+    assert (c.base, c.scope, c.horizon, c.samples, c.adaptive, c.batch, c.cap, c.keep) == ("rebalance", "map", 20, 200, 1.0, 50, 12, 2.0)
     assert c.prune == default_prune(20)
     paper = RolloutConfig(prune=default_prune(10))  # the dataclass's own defaults are the paper's
     assert surge.rollout_config(**PAPER) == paper
-    assert surge.rollout_config(**parse_policy("surge:base=greedy,scope=local,horizon=10,samples=1000,adaptive=none,cap=none,batch=100")[1]) == paper
+    assert surge.rollout_config(**parse_policy("surge:base=greedy,scope=local,horizon=10,samples=1000,adaptive=none,cap=none,batch=100,keep=none")[1]) == paper
     off = surge.rollout_config(cap=None)  # each approximation is turned off on its own
     assert (off.adaptive, off.batch, off.cap) == (1.0, 50, None)
     assert garces.rollout_config() == garces.rollout_config(**EXACT)
     # Pinned: what the label does not set and today's default differs in.
     assert pinned_options("surge:cap=12,forecast=true-rate") == {"horizon": 10, "samples": 1000, "base": "greedy", "scope": "local",
-                                                                  "adaptive": None, "batch": 100}
-    assert pinned_options("surge:base=rebalance,scope=map,horizon=20,samples=200,cap=12,adaptive=1", {**PAPER, "batch": 50}) == {}
+                                                                  "adaptive": None, "batch": 100, "keep": None}
+    fast = "surge:base=rebalance,scope=map,horizon=20,samples=200,cap=12,adaptive=1"
+    assert pinned_options(fast, {**PAPER, "batch": 50}) == {"keep": None}  # planned when surge took its best candidate
+    assert pinned_options(f"{fast},keep=2", {**PAPER, "batch": 50}) == {}
     assert pinned_options("garces2023") == pinned_options("greedy") == {}
 
 

@@ -160,7 +160,7 @@ def test_waves_match_sequential_turns_with_a_tail(end: dict) -> None:
     city = load_city("synthetic")
     obs = seeded_state(city, 7, taxis=80)
     fc = forecast(city, np.random.default_rng(7))
-    config = RolloutConfig(horizon=H, samples=SAMPLES, prune=default_prune(H), seed=1, adaptive=1.0, batch=16, cap=12, **end)
+    config = RolloutConfig(horizon=H, samples=SAMPLES, prune=default_prune(H), seed=1, adaptive=1.0, batch=16, cap=12, keep=2.0, **end)
     ctx = prepare_step(city, config, obs, DemandTables.build(city, fc, config.ce, config.seed), obs.t % 60)
     sequential = ctx.base_controls.copy()
     for agent in np.flatnonzero(obs.tau == 0):

@@ -192,7 +192,7 @@ def test_results_planned_before_surge_had_approximations_read_as_exact(small_run
     from agents.rollout_policy import EXACT, GREEDY_ROLLOUT
 
     assert small_run["surge_defaults"] == {"horizon": 20, "samples": 200, "base": "rebalance", "scope": "map", "cap": 12, "adaptive": 1.0,
-                                           "batch": 50}
+                                           "batch": 50, "keep": 2.0}
     labels = ["surge:samples=8,forecast=true-rate", "surge:adaptive=3,cap=24,samples=8,forecast=true-rate"]
     old = json.loads(json.dumps(small_run))
     del old["surge_defaults"]
@@ -211,6 +211,11 @@ def test_results_planned_before_surge_had_approximations_read_as_exact(small_run
     write_json(mid, path)
     assert read_results(path)["config"]["policy_options"] == {**FAST, labels[0]: {**greedy, "cap": 24, "adaptive": 2.0},
                                                               labels[1]: greedy}
+    # A file that records today's defaults but keep planned without it: every surge label that does not set keep.
+    nokeep = {**json.loads(json.dumps(old)), "surge_defaults": {k: v for k, v in small_run["surge_defaults"].items() if k != "keep"}}
+    nokeep["config"]["policies"].append("surge:samples=8,keep=3,forecast=true-rate")
+    write_json(nokeep, path)
+    assert read_results(path)["config"]["policy_options"] == {**FAST, labels[0]: {"keep": None}, labels[1]: {"keep": None}}
     write_json(old, path)
 
     grid = dict(hours=[19], seeds=2, taxis=40, minutes=20, policies=["greedy", "ia", "oracle", *labels])

@@ -31,11 +31,11 @@ def test_committed_decisions_reproduce() -> None:
 
 
 @pytest.mark.timeout(900)
-def test_default_surge_plans_as_the_committed_fast_rollout_over_rebalance() -> None:
-    """A bare ``surge`` label makes the decisions committed for the rollout over ``rebalance`` that became its default.
+def test_default_surge_plans_as_the_committed_rollout_over_rebalance_with_keep() -> None:
+    """A bare ``surge`` label makes the decisions committed for the rollout over ``rebalance`` with ``keep=2``.
 
-    The row is the fast variant's on the paper's date (synthetic city, 19 h, seed 0, previous-hour demand),
-    written when the label had to name every option.
+    The row is that variant's on the paper's date (synthetic city, 19 h, seed 0, previous-hour demand),
+    whose label names every option.
     """
     import datetime as dt
     from pathlib import Path
@@ -46,8 +46,8 @@ def test_default_surge_plans_as_the_committed_fast_rollout_over_rebalance() -> N
     from coordinator.experiments.evaluate import instance_seed
     from coordinator.experiments.results import read_results
 
-    label = "surge:base=rebalance,scope=map,horizon=20,samples=200,cap=12,adaptive=1"
-    path = Path(__file__).parents[2] / "benchmarks/practice-baselines/test-2022-11-17/h20-synthetic.json"
+    label = "surge:base=rebalance,scope=map,horizon=20,samples=200,cap=12,adaptive=1,keep=2"
+    path = Path(__file__).parents[2] / "benchmarks/practice-baselines/test-2022-11-17/keep-synthetic.json"
     doc = read_results(path)
     assert doc["config"]["policy_options"][label] == {"forecast": "previous-hour"}  # nothing pinned: it is exactly today's default
     row = next(e for e in doc["episodes"] if e["policy"] == label and (e["date"], e["hour"], e["seed"]) == ("2022-11-17", 19, 0))

@@ -1,8 +1,9 @@
 #!/bin/sh
 # The paper's baseline, garces2023, on the real map's main-table instances at 17 and 19 h (the paper's date, previous-hour
 # demand for every policy), for the share of the greedy->oracle gap it closes. The rows of greedy, rebalance, match and
-# FAST (today's default surge, named in full) are borrowed from fast-nyc.json, so only garces2023 runs. Seeds come in
-# rounds (ROUNDS, default "5 10"), so that a run cut short holds whole seeds at both hours.
+# FAST (surge:keep=none: the file records no keep) are borrowed from fast-nyc.json, so only garces2023 runs. Seeds come
+# in rounds (ROUNDS, default "5 10"), so that a run cut short holds whole seeds at both hours. To rerun it under today's
+# defaults see "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
 set -e
 cd "$(dirname "$0")/../../.."
 OUT=benchmarks/practice-baselines/test-2022-11-17

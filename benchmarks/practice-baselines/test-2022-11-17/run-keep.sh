@@ -1,8 +1,10 @@
 #!/bin/sh
-# The default surge keeping the base policy's control unless a candidate beats it by more than KEEP standard errors
-# (keep, chosen on validation data in benchmarks/rollout-variants/) on the main table's instances: the paper's date,
-# 25 seeds at each of its four hours, both maps, previous-hour demand. Every other row is borrowed from fast-<map>.json,
-# so only the variant runs. Seeds come in rounds (ROUNDS, default "10 25"), each map in turn; a rerun resumes.
+# surge (KEEP: FAST with keep=2, an agent keeping the base policy's control unless a candidate beats it by more than 2
+# standard errors; keep=2 chosen on validation data in benchmarks/rollout-variants/) on the main table's instances: the
+# paper's date, 25 seeds at each of its four hours, both maps, previous-hour demand. Every other row is borrowed from
+# fast-<map>.json, so only KEEP runs. Seeds come in rounds (ROUNDS, default "10 25"), each map in turn; a rerun resumes.
+# These files record no keep, so FAST in them is surge:keep=none; to rerun them under today's defaults see "Labels" in
+# benchmarks/practice-baselines/test-2022-11-17/README.md.
 set -e
 cd "$(dirname "$0")/../../.."
 OUT=benchmarks/practice-baselines/test-2022-11-17

@@ -5,7 +5,8 @@
 # policy. The label's first rows, run beside the 10-minute rollout, are borrowed from results-*.json. Seeds are
 # added in rounds (ROUNDS, default "5 7 10") so that a run cut short holds whole seeds at every hour; a rerun resumes.
 # FAST is the same rollout with three approximations that plan it about 6 times faster (samples=200, cap=12,
-# adaptive=1; benchmarks/rollout-variants/ measures what they cost on validation data).
+# adaptive=1; benchmarks/rollout-variants/ measures what they cost on validation data); these files record no keep, so
+# FAST in them is surge:keep=none.
 # A bare `surge` in these files is the greedy rollout, as they record; to rerun them under today's defaults see
 # "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
 set -e

@@ -1,7 +1,7 @@
 #!/bin/sh
 # surge rolled out over rebalance (base=rebalance, scope=map) added to the test-date runs of run.sh and
 # run-real-level.sh: the same instances and files, previous-hour demand for every policy; a resumed run
-# computes only the new label, seed by seed. The two maps run side by side.
+# computes only the added label, seed by seed. The two maps run side by side.
 # A bare `surge` in these files is the greedy rollout, as they record; to rerun them under today's defaults see
 # "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
 set -e

@@ -3,7 +3,8 @@
 # on validation data) on the further test dates of run.sh: the same instances, the other policies' rows borrowed from
 # results-*.json (not run again), previous-hour demand for every policy. Seeds come in rounds (ROUNDS, default
 # "3 5 10"), each map in turn, so that a run cut short holds whole seeds on both dates; a rerun resumes. The same
-# rollout with samples=200,cap=12,adaptive=1 (about 6 times faster; see benchmarks/rollout-variants/) runs beside it.
+# rollout with samples=200,cap=12,adaptive=1 (FAST, about 6 times faster; see benchmarks/rollout-variants/) runs beside
+# it; these files record no keep, so FAST in them is surge:keep=none.
 # A bare `surge` in these files is the greedy rollout, as they record; to rerun them under today's defaults see
 # "Labels" in benchmarks/practice-baselines/test-2022-11-17/README.md.
 set -e

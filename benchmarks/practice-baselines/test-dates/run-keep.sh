@@ -1,8 +1,10 @@
 #!/bin/sh
-# The default surge with keep (the base policy's control unless a candidate beats it by more than KEEP standard errors,
-# chosen on validation data in benchmarks/rollout-variants/) on the further test dates of run.sh: the same instances,
-# every other row borrowed from h20-*.json (not run again), previous-hour demand. Seeds come in rounds (ROUNDS, default
-# "5 10"), each map in turn; a rerun resumes.
+# surge (KEEP: FAST with keep=2, the base policy's control unless a candidate beats it by more than 2 standard errors;
+# keep=2 chosen on validation data in benchmarks/rollout-variants/) on the further test dates of run.sh: the same
+# instances, every other row borrowed from h20-*.json (not run again), previous-hour demand. Seeds come in rounds
+# (ROUNDS, default "5 10"), each map in turn; a rerun resumes. These files record no keep, so FAST in them is
+# surge:keep=none; to rerun them under today's defaults see "Labels" in
+# benchmarks/practice-baselines/test-2022-11-17/README.md.
 set -e
 cd "$(dirname "$0")/../../.."
 OUT=benchmarks/practice-baselines/test-dates
