@@ -218,7 +218,8 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
     if inp.skip:
         ctx.stats.add(True, False, 0, 0)
         # No candidate can change a cost: with ``keep`` that is no margin at all, so the base's control.
-        return int(inp.cands[kept(ctx, inp.cands, np.zeros((n_c, 0), np.int64), np.zeros(n_c, np.int64), 0, agent)])
+        b = base_candidate(ctx, inp.cands, agent) if ctx.config.keep is not None else None
+        return int(inp.cands[0 if b is None else b])
     if ctx.config.adaptive is not None:
         return adaptive_choice(ctx, inp, agent, serial, threads)
     if threads is None or serial:
@@ -232,6 +233,12 @@ def _plan(ctx: StepContext, committed: np.ndarray, agent: int, serial: bool, thr
     return int(inp.cands[kept(ctx, inp.cands, costs, np.full(n_c, S), least_total(costs), agent)])
 
 
+def base_candidate(ctx: StepContext, cands: np.ndarray, agent: int) -> int | None:
+    """The index in ``cands`` of the base policy's control for ``agent``, or ``None`` where it is not a candidate."""
+    at = np.flatnonzero(cands == ctx.base_controls[agent])
+    return int(at[0]) if at.size else None
+
+
 def kept(ctx: StepContext, cands: np.ndarray, costs: np.ndarray, ran: np.ndarray, best: int, agent: int) -> int:
     """The index of the candidate chosen: ``best``, or with ``config.keep`` the base policy's control unless ``best`` beats it by more than ``keep`` standard errors.
 
@@ -240,10 +247,10 @@ def kept(ctx: StepContext, cands: np.ndarray, costs: np.ndarray, ran: np.ndarray
     exactly when :func:`agents._adaptive.eliminate` at ``keep`` would drop ``b``.
     """
     z = ctx.config.keep
-    at = np.flatnonzero(cands == ctx.base_controls[agent])
-    if z is None or at.size == 0 or at[0] == best:
+    b = None if z is None else base_candidate(ctx, cands, agent)
+    if b is None or b == best:
         return best
-    b, n = int(at[0]), int(ran[at[0]])
+    n = int(ran[b])
     if n < 2:
         return b
     mean, se = paired_stats(np.asarray(costs, dtype=np.int64), n, best)

@@ -86,11 +86,12 @@ class RolloutConfig:
         Keep the base policy's control unless the best candidate beats it by
         more than ``keep`` standard errors of their mean paired difference
         (over the samples both ran); ``None``, the default here (the paper's;
-        the ``surge`` policy's is 2), takes the best candidate whatever the margin.  A rollout's Monte-Carlo minimum is
-        biased low: with a few hundred samples a candidate can look better
-        than the base's control by chance, and following the base where the
-        samples cannot tell them apart keeps the rollout from doing worse
-        than its base through noise alone.
+        the ``surge`` policy's is 2), takes the best candidate whatever the
+        margin.  A rollout's Monte-Carlo minimum is biased low: with a few
+        hundred samples a candidate can look better than the base's control
+        by chance, and following the base where the samples cannot tell them
+        apart keeps the rollout from doing worse than its base through noise
+        alone.
     """
 
     horizon: int = 10

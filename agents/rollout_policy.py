@@ -11,9 +11,10 @@ in their defaults.
     approximations (200 samples, ``cap=12``, ``adaptive=1`` in batches of
     50); an agent keeps the base's control unless a candidate beats it by 2
     standard errors (``keep=2``).  Chosen on validation data over the paper's
-    configuration (benchmarks/rollout-variants/, benchmarks/practice-baselines/).  :data:`PAPER` is the paper's
-    configuration (greedy base, H = 10, local sampling, 1,000 samples,
-    planned exactly); ``surge reproduce`` plans so.
+    configuration (benchmarks/rollout-variants/, benchmarks/practice-baselines/).
+    :data:`PAPER` is the paper's configuration (greedy base, H = 10, local
+    sampling, 1,000 samples, planned exactly, no ``keep``); ``surge
+    reproduce`` plans so.
 ``garces2023`` (Garces et al. 2023, the paper's baseline 3)
     Instantaneous-assignment base policy; standard certainty equivalence;
     requests sampled over the whole map; forecast ``previous-hour``.

@@ -2,9 +2,10 @@
 
 Run from the repository root: python benchmarks/practice-baselines/test-2022-11-17/summarize.py
 
-``FAST`` is today's default ``surge``, named in full; ``S1000`` is it with 1,000 samples, ``KEEP`` with ``keep=2``. A bare ``surge`` in
-these files is the greedy rollout (``surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2``),
-as the files record (``surge_defaults``).
+``KEEP`` is the default ``surge``, named in full; ``FAST`` is it without ``keep`` (the files record no ``keep``, so
+it reads as ``surge:keep=none``), ``S1000`` that with 1,000 samples. A bare ``surge`` in these files is the greedy
+rollout (``surge:base=greedy,scope=local,horizon=10,samples=1000,cap=24,adaptive=2,keep=none``), as the files record
+(``surge_defaults``).
 """
 
 from __future__ import annotations
@@ -22,23 +23,23 @@ HERE = Path(__file__).parent
 FILES = {
     "synthetic, 10 seeds at 17 and 19 h": HERE / "results-synthetic.json",
     "nyc (real 2022 level), 10 seeds at 4 hours": HERE / "results-nyc-real-level.json",
-    "synthetic, main table, default surge": HERE / "fast-synthetic.json",
-    "nyc (real 2022 level), main table, default surge": HERE / "fast-nyc.json",
-    "synthetic, main table": HERE / "main-synthetic.json",
-    "nyc (real 2022 level), main table": HERE / "main-nyc.json",
+    "synthetic, main table, surge:keep=none": HERE / "fast-synthetic.json",
+    "nyc (real 2022 level), main table, surge:keep=none": HERE / "fast-nyc.json",
+    "synthetic, main table, the greedy rollout": HERE / "main-synthetic.json",
+    "nyc (real 2022 level), main table, the greedy rollout": HERE / "main-nyc.json",
     "synthetic, 20-minute rollout over rebalance at 4 hours": HERE / "h20-synthetic.json",
     "nyc (real 2022 level), 20-minute rollout over rebalance at 4 hours": HERE / "h20-nyc.json",
     "nyc (real 2022 level), main table, garces2023 at 17 and 19 h": HERE / "garces-nyc.json",
-    "synthetic, main table, default surge with 1,000 samples": HERE / "samples1000-synthetic.json",
-    "nyc (real 2022 level), main table, default surge with 1,000 samples": HERE / "samples1000-nyc.json",
-    "synthetic, main table, default surge with keep=2": HERE / "keep-synthetic.json",
-    "nyc (real 2022 level), main table, default surge with keep=2": HERE / "keep-nyc.json",
+    "synthetic, main table, surge:keep=none with 1,000 samples": HERE / "samples1000-synthetic.json",
+    "nyc (real 2022 level), main table, surge:keep=none with 1,000 samples": HERE / "samples1000-nyc.json",
+    "synthetic, main table, surge": HERE / "keep-synthetic.json",
+    "nyc (real 2022 level), main table, surge": HERE / "keep-nyc.json",
     "synthetic, further test dates": HERE.parent / "test-dates" / "results-synthetic.json",
     "nyc (real 2022 level), further test dates": HERE.parent / "test-dates" / "results-nyc.json",
     "synthetic, further test dates, 20-minute rollout over rebalance": HERE.parent / "test-dates" / "h20-synthetic.json",
     "nyc (real 2022 level), further test dates, 20-minute rollout over rebalance": HERE.parent / "test-dates" / "h20-nyc.json",
-    "synthetic, further test dates, default surge with keep=2": HERE.parent / "test-dates" / "keep-synthetic.json",
-    "nyc (real 2022 level), further test dates, default surge with keep=2": HERE.parent / "test-dates" / "keep-nyc.json",
+    "synthetic, further test dates, surge": HERE.parent / "test-dates" / "keep-synthetic.json",
+    "nyc (real 2022 level), further test dates, surge": HERE.parent / "test-dates" / "keep-nyc.json",
 }
 H10, H20 = "surge:base=rebalance,scope=map", "surge:base=rebalance,scope=map,horizon=20"
 FAST = H20 + ",samples=200,cap=12,adaptive=1"
